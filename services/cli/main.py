@@ -1,0 +1,35 @@
+"""`harvest`: run stacks, inspect the live bus, and work with recordings. `--help` everywhere."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from services.cli import bench, files, live, replay, run
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="harvest", description=__doc__)
+    sub = ap.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    run.add_parser(sub)
+    live.add_parsers(sub)
+    files.add_parsers(sub)
+    replay.add_parsers(sub)
+    bench.add_parser(sub)
+    return ap
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args))
+    except KeyboardInterrupt:
+        return 130
+    except BrokenPipeError:  # `harvest echo ... | head`
+        return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,101 @@
+"""`harvest run`: start a stack under the supervisor and print a summary when it ends."""
+
+from __future__ import annotations
+
+import argparse
+import secrets
+import time
+from pathlib import Path
+
+from rich.console import Console
+from rich.table import Table
+
+from services.recorder.inspect import RecordingError, read_info
+from services.runtime.settings import SettingsError, parse_overrides
+from services.supervisor.stack import StackError, load_stack
+from services.supervisor.supervisor import RunResult, Supervisor
+
+DEFAULT_STACK = Path("deploy/stack.yaml")
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "run",
+        help="run a stack (default: deploy/stack.yaml) and record it",
+        description="Start the router, the recorder and every service of a "
+        "stack; stop in order on Ctrl-C or when the main service ends.",
+    )
+    p.add_argument("--stack", type=Path, default=DEFAULT_STACK, help="stack file (YAML)")
+    p.add_argument("--profile", help="a profile of the stack file to overlay")
+    p.add_argument(
+        "--set",
+        action="append",
+        metavar="SERVICE.KEY=VALUE",
+        help="override a service setting, e.g. demo_clock.ticks=50; repeatable",
+    )
+    p.add_argument("--run-id", help="run id (default run-<date>-<time>-<random>)")
+    p.add_argument("--listen", help="router endpoint (overrides the stack's router.listen)")
+    p.add_argument("--no-record", action="store_true", help="do not record an MCAP")
+    p.add_argument("--quiet", action="store_true", help="no service logs on the terminal")
+    p.set_defaults(func=cmd_run)
+
+
+def new_run_id() -> str:
+    return time.strftime("run-%Y%m%d-%H%M%S-") + secrets.token_hex(2)
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    console = Console(stderr=False)
+    try:
+        overrides = parse_overrides(args.set)
+        stack = load_stack(args.stack, args.profile, overrides)
+    except (StackError, SettingsError) as exc:
+        console.print(f"[red]refused to start:[/] {exc}")
+        return 2
+    updates: dict[str, object] = {}
+    if args.no_record:
+        updates["recording"] = stack.recording.model_copy(update={"enabled": False})
+    if args.listen:
+        updates["router"] = stack.router.model_copy(update={"listen": (args.listen,)})
+    if updates:
+        stack = stack.model_copy(update=updates)
+    sup = Supervisor(stack, args.stack, args.run_id or new_run_id(), args.profile, quiet=args.quiet)
+    try:
+        result = sup.run()
+    except StackError as exc:
+        console.print(f"[red]refused to start:[/] {exc}")
+        return 2
+    print_summary(console, result)
+    return result.exit_code
+
+
+def print_summary(console: Console, r: RunResult) -> None:
+    t = Table(title=f"run {r.run_id}", show_header=True)
+    t.add_column("service")
+    t.add_column("restarts", justify="right")
+    t.add_column("exit codes")
+    for name, c in r.children.items():
+        t.add_row(name, str(c.restarts), ",".join(map(str, c.proc.exit_codes)) or "-")
+    console.print(t)
+    if r.mcap is not None:
+        try:
+            info = read_info(r.mcap)
+            tt = Table(title=f"recording {r.mcap}")
+            tt.add_column("topic")
+            tt.add_column("messages", justify="right")
+            for ch in info.channels:
+                tt.add_row(ch.topic, str(ch.count))
+            console.print(tt)
+            console.print(
+                f"recorded {info.message_count} messages, "
+                f"{info.duration_s:.2f} s of stamps, {info.size_bytes / 1e6:.1f} MB"
+            )
+        except RecordingError as exc:
+            console.print(f"[yellow]recording:[/] {exc}")
+    console.print(f"wall time {r.wall_s:.1f} s; log {r.log}")
+    if r.exit_code == 0:
+        console.print("[green]run finished[/]")
+    elif r.exit_code == 130:
+        console.print("[yellow]run interrupted; recording finished cleanly[/]")
+    else:
+        console.print(f"[red]run failed:[/] {r.failure}")

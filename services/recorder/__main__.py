@@ -1,0 +1,156 @@
+"""python -m services.recorder --out recordings/<run>.mcap [--run-meta FILE]
+
+Writes every sample of the namespace to one MCAP (see writer.py). Finishes the file on
+SIGTERM/SIGINT; a SIGKILLed file can be repaired with `harvest recover`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import queue
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+from schemas.service import ServiceState, ServiceStatus
+from services import __version__
+from services.bus import Bus, BusError, RawSample, add_bus_args, bus_settings_from_args
+from services.recorder import SERVICE, Settings
+from services.recorder.writer import RUN_METADATA, RunWriter
+from services.runtime.service import add_service_args, resolve_settings, setup_logging
+from services.runtime.settings import SettingsError, config_hash
+
+log = logging.getLogger("recorder")
+
+
+class Recorder:
+    """Queue fed by Zenoh callbacks, drained by one writer thread (the MCAP writer is not
+    thread-safe, and the callbacks must stay short)."""
+
+    def __init__(self, bus: Bus, writer: RunWriter, settings: Settings, chash: str) -> None:
+        self.bus, self.writer, self.s, self.chash = bus, writer, settings, chash
+        self.q: queue.SimpleQueue[RawSample | None] = queue.SimpleQueue()
+        self.state: ServiceState = "starting"
+        self.errors = 0
+        self._logged_unknown: set[str] = set()
+
+    def on_sample(self, sample: RawSample) -> None:
+        self.bus.counters_for(sample.key).received += 1
+        self.q.put(sample)
+
+    def run(self) -> None:
+        """Writer loop; returns after a None sentinel, with the file finished."""
+        last_flush = time.monotonic()
+        while True:
+            try:
+                item = self.q.get(timeout=0.1)
+            except queue.Empty:
+                pass  # idle: still flush on time below
+            else:
+                if item is None:
+                    break
+                self._write(item)
+            if time.monotonic() - last_flush >= self.s.flush_interval_s:
+                self.writer.flush()
+                last_flush = time.monotonic()
+        self.writer.finish()
+
+    def _write(self, s: RawSample) -> None:
+        result = self.writer.write(s.key, s.payload, s.encoding, s.recv_ns)
+        if result == "rejected":
+            self.bus.reject(s.key, "payload does not decode; recorded under _rejected/")
+        elif result == "unknown":
+            self.bus.rejected_unknown += 1
+            if s.key not in self._logged_unknown:
+                self._logged_unknown.add(s.key)
+                log.warning("key %r is not in the topic map; recorded without a schema", s.key)
+
+    def status(self) -> ServiceStatus:
+        return ServiceStatus(
+            name="recorder",
+            version=__version__,
+            config_hash=self.chash,
+            pid=os.getpid(),
+            state=self.state,
+            mode="live",
+            spec=SERVICE.spec.model(),
+            topics={k: c.frozen() for k, c in sorted(self.bus.counters.items())},
+            rejected_unknown=self.bus.rejected_unknown,
+            errors=self.errors,
+        )
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(
+        prog="python -m services.recorder",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    add_bus_args(ap)
+    add_service_args(ap)
+    ap.add_argument("--out", type=Path, help="MCAP file to write (default <out_dir>/<ts>.mcap)")
+    ap.add_argument("--run-meta", type=Path, help="JSON object of run metadata (str → str)")
+    args = ap.parse_args(argv)
+    setup_logging("recorder", args.log_level)
+    try:
+        settings = resolve_settings(SERVICE, args)
+        meta = _read_meta(args.run_meta)
+    except (SettingsError, ValueError) as exc:
+        print(f"recorder: {exc}", file=sys.stderr)
+        return 2
+    assert isinstance(settings, Settings)
+    out = args.out or settings.out_dir / time.strftime("run-%Y%m%d-%H%M%S.mcap")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        stream = open(out, "wb")  # noqa: SIM115 - closed after finish()
+    except OSError as exc:
+        print(f"recorder: cannot write {out}: {exc.strerror}", file=sys.stderr)
+        return 2
+    writer = RunWriter(stream, settings.compression, settings.chunk_size_bytes)
+    if meta:
+        writer.add_metadata(RUN_METADATA, meta)
+    try:
+        bus = Bus("recorder", bus_settings_from_args(args))
+    except BusError as exc:
+        log.error("%s", exc)
+        return 1
+    rec = Recorder(bus, writer, settings, config_hash(settings))
+    bus.subscribe_raw(settings.keyexpr, rec.on_sample)
+    bus.serve_status(rec.status)
+    stop = threading.Event()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop.set())
+    worker = threading.Thread(target=rec.run, name="mcap-writer")
+    worker.start()
+    rec.state = "running"
+    bus.declare_health()
+    log.info("recording to %s", out)
+    stop.wait()
+    rec.state = "stopping"
+    bus.close()  # no more samples after this
+    rec.q.put(None)
+    worker.join()
+    stream.close()
+    n = sum(st.messages for st in writer.stats.values())
+    log.info("finished %s: %d messages on %d channels", out, n, len(writer.stats))
+    return 0
+
+
+def _read_meta(path: Path | None) -> dict[str, str]:
+    if path is None:
+        return {}
+    data = json.loads(path.read_text())
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: run metadata must be a JSON object")
+    return {
+        str(k): v if isinstance(v, str) else json.dumps(v, sort_keys=True) for k, v in data.items()
+    }
+
+
+if __name__ == "__main__":
+    sys.exit(main())

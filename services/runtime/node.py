@@ -1,0 +1,264 @@
+"""The thin process around a pure core: inputs from the bus, one worker thread, outputs, status.
+
+Every input is decoded on a Zenoh thread, checked for order, queued, and handed to the core on
+one worker thread in arrival order. With all services as clients of one router, arrival order
+is causal order, which is what makes lock-step runs byte-identical.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import threading
+import time
+from collections import deque
+from collections.abc import Sequence
+from typing import Any, Literal, Protocol
+
+from schemas.service import ServiceState, ServiceStatus
+from services import __version__
+from services.bus import Bus, BusSettings
+from services.runtime.lockstep import AnswerBarrier, LockstepPlan, LockstepStall
+from services.runtime.spec import NodeSpec
+
+log = logging.getLogger("node")
+
+Output = tuple[str, Any]
+Mode = Literal["lockstep", "live"]
+
+
+class Core(Protocol):
+    """A reactive core: pure, deterministic, no I/O and no wall clock."""
+
+    def handle(self, topic: str, msg: Any) -> Sequence[Output]: ...
+
+
+class SourceCore(Protocol):
+    """A clock-master core: emits the messages of a tick, takes answers, advances time."""
+
+    def done(self) -> bool: ...
+    def now_ns(self) -> int: ...
+    def emit(self) -> Sequence[Sequence[Output]]: ...
+    def handle(self, topic: str, msg: Any) -> Sequence[Output]: ...
+    def advance(self) -> None: ...
+
+
+class InputOrder:
+    """Per-topic order check: drop duplicated or out-of-order messages and stamps that go back.
+
+    A publisher that restarts begins again at seq 0; that is accepted when its stamp does not go
+    back (a replayed old seq 0 has an old stamp and is dropped).
+    """
+
+    def __init__(self) -> None:
+        self.last: dict[str, tuple[int, int]] = {}
+
+    def check(self, topic: str, seq: int, stamp_ns: int) -> str | None:
+        prev = self.last.get(topic)
+        if prev is not None:
+            pseq, pstamp = prev
+            if stamp_ns < pstamp:
+                return f"stamp went backwards: {stamp_ns} < {pstamp} ns (seq {seq})"
+            if seq <= pseq and seq != 0:
+                return f"duplicate or out-of-order seq {seq} (last {pseq})"
+            if seq == 0 and pseq == 0:
+                return "duplicate seq 0"
+            if seq == 0:
+                log.info("%s: seq restarted at 0 (publisher restarted)", topic)
+        self.last[topic] = (seq, stamp_ns)
+        return None
+
+
+class Node:
+    """One service process on the bus."""
+
+    def __init__(
+        self,
+        name: str,
+        spec: NodeSpec,
+        bus_settings: BusSettings,
+        mode: Mode,
+        config_hash: str = "",
+        plan: LockstepPlan | None = None,
+    ) -> None:
+        self.name, self.spec, self.mode, self.config_hash = name, spec, mode, config_hash
+        self.plan = plan or LockstepPlan()
+        self.state: ServiceState = "starting"
+        self.errors = 0
+        self.stop_event = threading.Event()
+        self._queue: deque[Output] = deque()
+        self._cv = threading.Condition()
+        self._order = InputOrder()
+        self._error_log: set[str] = set()
+        self.barrier = AnswerBarrier(self.plan.wait) if mode == "lockstep" else None
+        self.bus = Bus(name, bus_settings)
+        self._pubs = {k: self.bus.publisher(k) for k in spec.outputs}
+        listen = set(spec.inputs) | (self.barrier.topics if self.barrier else set())
+        for key in sorted(listen):
+            if key != "**":
+                self.bus.subscribe(key, self._on_input)
+        self.bus.serve_status(self.status)
+
+    # ---- lifecycle -------------------------------------------------------------------------
+    def ready(self) -> None:
+        """Declare health last, so a live token means every subscription is in place."""
+        self.state = "running"
+        self.bus.declare_health()
+
+    def stop(self) -> None:
+        self.stop_event.set()
+        with self._cv:
+            self._cv.notify_all()
+
+    def close(self) -> None:
+        self.state = "stopping"
+        self.bus.close()
+
+    def status(self) -> ServiceStatus:
+        return ServiceStatus(
+            name=self.name,
+            version=__version__,
+            config_hash=self.config_hash,
+            pid=os.getpid(),
+            state=self.state,
+            mode=self.mode,
+            spec=self.spec.model(),
+            topics={k: c.frozen() for k, c in sorted(self.bus.counters.items())},
+            rejected_unknown=self.bus.rejected_unknown,
+            errors=self.errors,
+        )
+
+    # ---- inputs ----------------------------------------------------------------------------
+    def _on_input(self, topic: str, msg: Any) -> None:
+        header = msg.header
+        is_input = topic in self.spec.inputs
+        with self._cv:
+            if is_input:
+                problem = self._order.check(topic, header.seq, header.stamp_ns)
+                if problem:
+                    self.bus.reject(topic, problem)
+                    return
+                if self.mode == "live" and topic in self.spec.conflate:
+                    self._drop_pending(topic)
+                self._queue.append((topic, msg))
+                self._cv.notify_all()
+        if self.barrier is not None:
+            self.barrier.note(topic, header.stamp_ns)
+
+    def _drop_pending(self, topic: str) -> None:
+        kept = [item for item in self._queue if item[0] != topic]
+        if len(kept) != len(self._queue):
+            self._queue.clear()
+            self._queue.extend(kept)
+
+    def next_input(self, timeout_s: float | None = None) -> Output | None:
+        """The oldest pending input, waiting up to ``timeout_s``; None on stop or timeout."""
+        with self._cv:
+            if not self._queue and not self.stop_event.is_set():
+                self._cv.wait(timeout=timeout_s)
+            return self._queue.popleft() if self._queue else None
+
+    def drain(self) -> list[Output]:
+        with self._cv:
+            items = list(self._queue)
+            self._queue.clear()
+            return items
+
+    # ---- outputs ---------------------------------------------------------------------------
+    def publish(self, outputs: Sequence[Output]) -> None:
+        for topic, msg in outputs:
+            pub = self._pubs.get(topic)
+            if pub is None:
+                raise RuntimeError(f"{self.name} published undeclared topic {topic!r}")
+            pub.put(msg)
+
+    def call(self, fn: Any, topic: str, msg: Any) -> Sequence[Output]:
+        """Run a core handler; an exception is counted and logged once per kind, never fatal."""
+        try:
+            return fn(topic, msg)
+        except Exception as exc:
+            self.errors += 1
+            kind = f"{topic}:{type(exc).__name__}"
+            if kind not in self._error_log:
+                self._error_log.add(kind)
+                log.exception(
+                    "core failed on %s seq %s (counted; later ones of this kind are not logged)",
+                    topic,
+                    getattr(msg.header, "seq", "?"),
+                )
+            return ()
+
+    # ---- loops -----------------------------------------------------------------------------
+    def run_reactive(self, core: Core) -> None:
+        """Hand every input to the core in arrival order until stopped."""
+        while not self.stop_event.is_set():
+            item = self.next_input(timeout_s=0.2)
+            if item is not None:
+                self.publish(self.call(core.handle, *item))
+
+    def run_source(self, core: SourceCore, speed: float = 1.0) -> None:
+        """Clock-master loop: emit a tick's groups, wait for their answers, feed inputs, advance.
+
+        In live mode nothing is awaited and sim time is paced by the wall clock × ``speed``.
+        """
+        self._await_consumers()
+        wall0, sim0 = time.monotonic(), core.now_ns()
+        while not self.stop_event.is_set() and not core.done():
+            for group in core.emit():
+                self._publish_group(group)
+                self._feed(core)
+            core.advance()
+            if self.mode == "live":
+                lag = (core.now_ns() - sim0) * 1e-9 / speed - (time.monotonic() - wall0)
+                if lag > 0:
+                    self.stop_event.wait(lag)
+        self._feed(core)
+
+    def _publish_group(self, group: Sequence[Output]) -> None:
+        self.publish(group)
+        if self.barrier is None:
+            return
+        for topic, msg in group:
+            self.barrier.expect(topic, msg.header.stamp_ns)
+        try:
+            self.barrier.wait(
+                lambda: self._resend(group),
+                self.plan.resend_after_s,
+                self.plan.stall_timeout_s,
+                self._describe_missing,
+            )
+        except LockstepStall:
+            self.state = "failed"
+            raise
+
+    def _resend(self, group: Sequence[Output]) -> None:
+        log.warning(
+            "lock-step: %s; re-publishing the tick",
+            self._describe_missing(self.barrier.missing() if self.barrier else []),
+        )
+        self.publish(group)
+
+    def _describe_missing(self, missing: list[tuple[str, int]]) -> str:
+        live = set(self.bus.live_services(timeout_s=0.3))
+        dead = [c for c in self.plan.consumers if c not in live]
+        parts = ", ".join(f"{t} @ {s} ns" for t, s in missing)
+        tail = f"; consumers not live: {', '.join(dead)}" if dead else ""
+        return f"no answer yet on {parts}{tail}"
+
+    def _feed(self, core: SourceCore) -> None:
+        for topic, msg in self.drain():
+            self.publish(self.call(core.handle, topic, msg))
+
+    def _await_consumers(self, timeout_s: float = 60.0) -> None:
+        """Before tick 0: every declared consumer must be live (its subscriptions are up)."""
+        if not self.plan.consumers:
+            return
+        deadline = time.monotonic() + timeout_s
+        while not self.stop_event.is_set():
+            live = set(self.bus.live_services(timeout_s=0.5))
+            missing = [c for c in self.plan.consumers if c not in live]
+            if not missing:
+                return
+            if time.monotonic() > deadline:
+                raise LockstepStall(f"consumers never came up: {', '.join(missing)}")
+            self.stop_event.wait(0.05)

@@ -1,0 +1,117 @@
+"""A child process in its own process group, with prefixed, coloured log lines."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO
+
+_COLOURS = [36, 32, 33, 35, 34, 91, 92, 93, 94, 95, 96]
+
+
+class LogSink:
+    """Writes ``name | line`` to the terminal (coloured on a TTY) and to a run log file."""
+
+    def __init__(self, file: Path | None = None, quiet: bool = False) -> None:
+        self._lock = threading.Lock()
+        self._colour: dict[str, int] = {}
+        self._tty = sys.stdout.isatty()
+        self._file: IO[str] | None = open(file, "a") if file else None  # noqa: SIM115
+        self.quiet = quiet
+        self.width = 12
+
+    def line(self, name: str, text: str) -> None:
+        with self._lock:
+            if name not in self._colour:
+                self._colour[name] = _COLOURS[len(self._colour) % len(_COLOURS)]
+            tag = name.ljust(self.width)
+            if self._file:
+                self._file.write(f"{tag}| {text}\n")
+                self._file.flush()
+            if self.quiet:
+                return
+            if self._tty:
+                print(f"\x1b[{self._colour[name]}m{tag}|\x1b[0m {text}", flush=True)
+            else:
+                print(f"{tag}| {text}", flush=True)
+
+    def close(self) -> None:
+        if self._file:
+            self._file.close()
+
+
+@dataclass
+class ManagedProcess:
+    """One service process; ``start`` may be called again to restart it."""
+
+    name: str
+    argv: list[str]
+    sink: LogSink
+    env: dict[str, str] = field(default_factory=dict)
+    proc: subprocess.Popen[bytes] | None = None
+    started_at: float = 0.0
+    exit_codes: list[int] = field(default_factory=list)
+    tail: list[str] = field(default_factory=list)
+    _reader: threading.Thread | None = None
+
+    def start(self) -> None:
+        env = {**os.environ, "PYTHONUNBUFFERED": "1", **self.env}
+        self.proc = subprocess.Popen(
+            self.argv,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+            start_new_session=True,
+            env=env,
+        )
+        self.started_at = time.monotonic()
+        self._reader = threading.Thread(
+            target=self._pump, args=(self.proc,), daemon=True, name=f"log-{self.name}"
+        )
+        self._reader.start()
+
+    def _pump(self, proc: subprocess.Popen[bytes]) -> None:
+        assert proc.stdout is not None
+        for raw in proc.stdout:
+            text = raw.decode(errors="replace").rstrip()
+            self.tail = [*self.tail[-19:], text]
+            self.sink.line(self.name, text)
+
+    @property
+    def pid(self) -> int | None:
+        return self.proc.pid if self.proc else None
+
+    def poll(self) -> int | None:
+        """Exit code once the process has ended, else None."""
+        return self.proc.poll() if self.proc is not None else None
+
+    def running(self) -> bool:
+        return self.proc is not None and self.proc.poll() is None
+
+    def signal(self, sig: int) -> None:
+        if self.running() and self.proc is not None:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(self.proc.pid, sig)
+
+    def stop(self, timeout_s: float = 10.0) -> int | None:
+        """SIGTERM the group, wait, then SIGKILL; returns the exit code."""
+        if self.proc is None:
+            return None
+        if self.running():
+            self.signal(signal.SIGTERM)
+            try:
+                self.proc.wait(timeout=timeout_s)
+            except subprocess.TimeoutExpired:
+                self.sink.line(self.name, f"did not stop within {timeout_s:.0f} s: SIGKILL")
+                self.signal(signal.SIGKILL)
+                self.proc.wait()
+        if self._reader:
+            self._reader.join(timeout=2.0)
+        return self.proc.returncode

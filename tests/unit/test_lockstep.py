@@ -1,0 +1,78 @@
+"""Lock-step barrier and answer closure."""
+
+from __future__ import annotations
+
+import threading
+
+import pytest
+
+from services.runtime.lockstep import AnswerBarrier, LockstepStall
+from services.runtime.node import InputOrder
+from services.runtime.spec import NodeSpec, answer_closure
+
+CHAIN = [
+    NodeSpec(inputs=("camera/rgbd",), outputs=("perception/detections",),
+             answers={"camera/rgbd": ("perception/detections",)}),
+    NodeSpec(inputs=("perception/detections",), outputs=("perception/tracks",),
+             answers={"perception/detections": ("perception/tracks",)}),
+    NodeSpec(inputs=("perception/tracks", "camera/rgbd"), outputs=("scene/state",),
+             answers={"perception/tracks": ("scene/state",)}),
+]
+
+
+def test_closure_follows_answers_transitively() -> None:
+    assert answer_closure("camera/rgbd", CHAIN) == (
+        "perception/detections", "perception/tracks", "scene/state")
+    assert answer_closure("robot/joint_state", CHAIN) == ()
+
+
+def test_spec_refuses_inconsistent_answers() -> None:
+    with pytest.raises(ValueError, match="undeclared outputs"):
+        NodeSpec(inputs=("demo/tick",), answers={"demo/tick": ("demo/answer",)})
+    with pytest.raises(ValueError, match="unknown topic"):
+        NodeSpec(inputs=("demo/nope",))
+
+
+def test_barrier_counts_answers_per_stamp() -> None:
+    b = AnswerBarrier({"camera/rgbd": ("scene/state",), "robot/joint_state": ("scene/state",)})
+    b.expect("camera/rgbd", 100)
+    b.note("scene/state", 100)
+    b.wait(lambda: None, 1.0, 1.0, str)
+    # A second group at the same stamp needs its own answer, not the first one's.
+    b.expect("robot/joint_state", 100)
+    assert b.missing() == [("scene/state", 100)]
+    t = threading.Timer(0.05, lambda: b.note("scene/state", 100))
+    t.start()
+    b.wait(lambda: None, 1.0, 2.0, str)
+    t.join()
+
+
+def test_barrier_resends_then_stalls() -> None:
+    b = AnswerBarrier({"demo/tick": ("demo/answer",)})
+    b.expect("demo/tick", 5)
+    resends = []
+    with pytest.raises(LockstepStall, match="demo/answer"):
+        b.wait(lambda: resends.append(1), 0.05, 0.3, lambda m: f"missing {m}")
+    assert len(resends) >= 2
+
+
+def test_extra_answers_do_not_satisfy_a_later_group() -> None:
+    b = AnswerBarrier({"demo/tick": ("demo/answer",)})
+    b.expect("demo/tick", 5)
+    b.note("demo/answer", 5)
+    b.note("demo/answer", 5)  # a consumer that answered twice
+    b.wait(lambda: None, 1.0, 1.0, str)
+    b.expect("demo/tick", 5)
+    assert b.missing() == [("demo/answer", 5)]
+
+
+def test_input_order_drops_duplicates_and_backwards_stamps() -> None:
+    o = InputOrder()
+    assert o.check("t", 0, 10) is None
+    assert o.check("t", 1, 20) is None
+    assert "duplicate" in (o.check("t", 1, 20) or "")
+    assert "backwards" in (o.check("t", 2, 5) or "")
+    assert "backwards" in (o.check("t", 0, 0) or "")  # an old seq 0 replayed
+    assert o.check("t", 0, 30) is None  # publisher restarted: seq 0 with a new stamp
+    assert "duplicate" in (o.check("t", 0, 30) or "")
+    assert o.check("u", 5, 0) is None  # topics are independent
