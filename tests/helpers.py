@@ -15,8 +15,12 @@ from pathlib import Path
 from services.bus import Bus, BusSettings, bus_args
 
 
-def wait_until(pred: Callable[[], object], timeout_s: float = 10.0, what: str = "condition",
-               interval_s: float = 0.02) -> object:
+def wait_until(
+    pred: Callable[[], object],
+    timeout_s: float = 10.0,
+    what: str = "condition",
+    interval_s: float = 0.02,
+) -> object:
     """Poll ``pred`` until truthy; fail the test with ``what`` on timeout."""
     deadline = time.monotonic() + timeout_s
     while True:
@@ -39,8 +43,11 @@ class BusEnv:
     sessions: list[Bus] = field(default_factory=list)
 
     def settings(self, **kw: object) -> BusSettings:
-        base: dict[str, object] = {"mode": "client", "connect": (self.endpoint,),
-                                   "namespace": self.namespace}
+        base: dict[str, object] = {
+            "mode": "client",
+            "connect": (self.endpoint,),
+            "namespace": self.namespace,
+        }
         base.update(kw)
         return BusSettings.model_validate(base)
 
@@ -54,13 +61,13 @@ class BusEnv:
 
     def spawn(self, *argv: str, log: str | None = None) -> subprocess.Popen[bytes]:
         out = open(self.dir / (log or f"proc{len(self.procs)}.log"), "wb")  # noqa: SIM115
-        p = subprocess.Popen([sys.executable, *argv], stdout=out, stderr=subprocess.STDOUT,
-                             start_new_session=True)
+        p = subprocess.Popen(
+            [sys.executable, *argv], stdout=out, stderr=subprocess.STDOUT, start_new_session=True
+        )
         self.procs.append(p)
         return p
 
-    def service(self, module: str, *extra: str, log: str | None = None
-                ) -> subprocess.Popen[bytes]:
+    def service(self, module: str, *extra: str, log: str | None = None) -> subprocess.Popen[bytes]:
         return self.spawn("-m", module, *self.flags(), *extra, log=log or module)
 
     def log(self, name: str) -> str:
@@ -91,3 +98,65 @@ def make_bus_env() -> BusEnv:
 def remove(env: BusEnv) -> None:
     env.close()
     shutil.rmtree(env.dir, ignore_errors=True)
+
+
+def write_stack(
+    path: Path,
+    rec_dir: Path,
+    *,
+    ticks: int = 100,
+    mode: str = "lockstep",
+    worker_restart: str = "on-failure",
+    max_delay_ms: float = 2.0,
+    period_ms: float = 10.0,
+) -> Path:
+    """A demo stack file recording into ``rec_dir``."""
+    path.write_text(f"""
+name: test-demo
+mode: {mode}
+master: demo_clock
+recording: {{enabled: true, dir: {rec_dir}}}
+services:
+  demo_worker:
+    restart: {{policy: {worker_restart}, max_restarts: 3, backoff_s: 0.2}}
+    settings: {{max_delay_ms: {max_delay_ms}}}
+  demo_clock:
+    main: true
+    settings: {{ticks: {ticks}, period_ms: {period_ms}}}
+""")
+    return path
+
+
+def harvest(*args: str, timeout: float = 120, **kw: object) -> subprocess.CompletedProcess[str]:
+    """Run the `harvest` CLI in a subprocess."""
+    return subprocess.run(
+        [sys.executable, "-m", "services.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        **kw,
+    )  # type: ignore[call-overload]
+
+
+def start_harvest(*args: str, log: Path) -> subprocess.Popen[bytes]:
+    out = open(log, "wb")  # noqa: SIM115
+    return subprocess.Popen(
+        [sys.executable, "-m", "services.cli", *args], stdout=out, stderr=subprocess.STDOUT
+    )
+
+
+def payloads_by_topic(mcap: Path) -> dict[str, list[tuple[int, bytes]]]:
+    """Recorded (seq, payload) per topic, in order, re-sent duplicates collapsed."""
+    from services.recorder.inspect import iter_messages
+
+    out: dict[str, list[tuple[int, bytes]]] = {}
+    for m in iter_messages(mcap):
+        seen = out.setdefault(m.topic, [])
+        if not seen or seen[-1] != (m.sequence, m.payload):
+            seen.append((m.sequence, m.payload))
+    return out
+
+
+def short_dir() -> Path:
+    """A short temp dir (unix socket paths are limited to ~100 characters)."""
+    return Path(tempfile.mkdtemp(prefix="hv-", dir="/tmp"))

@@ -7,9 +7,9 @@ import json
 import sys
 from pathlib import Path
 
-from rich.console import Console
 from rich.table import Table
 
+from services.cli.ui import console
 from services.recorder.inspect import MCAP_MAGIC, RecordingError, read_info
 from services.recorder.recover import recover
 
@@ -60,7 +60,7 @@ def cmd_info(args: argparse.Namespace) -> int:
             )
         )
         return 0
-    con = Console()
+    con = console()
     t = Table(title=str(info.path))
     for col in ("topic", "schema", "encoding", "messages"):
         t.add_column(col, justify="right" if col == "messages" else "left")

@@ -9,13 +9,13 @@ import threading
 import time
 from collections import defaultdict
 
-from rich.console import Console
 from rich.table import Table
 
 from schemas.camera import RgbdFrame
 from schemas.codec import DecodeError
 from schemas.topics import TOPICS
 from services.bus import Bus, BusError, RawSample, add_bus_args, bus_settings_from_args
+from services.cli.ui import console
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
@@ -111,7 +111,7 @@ def cmd_topics(args: argparse.Namespace) -> int:
         t.add_column(col, justify="right" if col in ("rate Hz", "kB/s") else "left")
     for r in rows:
         t.add_row(r["key"], r["schema"], f"{r['rate_hz']:.1f}", f"{r['kbytes_per_s']:.1f}")
-    Console().print(t)
+    console().print(t)
     return 0
 
 
@@ -195,5 +195,5 @@ def cmd_status(args: argparse.Namespace) -> int:
             str(tot[2] + s.rejected_unknown),
             str(s.errors),
         )
-    Console().print(t)
+    console().print(t)
     return 0 if statuses else 1

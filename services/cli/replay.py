@@ -7,16 +7,17 @@ import json
 import sys
 from pathlib import Path
 
-from rich.console import Console
 from rich.progress import Progress
 from rich.table import Table
 
 from services.bus import BusError, add_bus_args, keyexpr_intersects
 from services.cli.live import open_run_bus
+from services.cli.ui import console
 from services.recorder.inspect import RecordingError, iter_messages, read_info
 from services.registry import UnknownServiceError
 from services.replay.player import OutputCollector, Player
 from services.replay.resim import ResimError, resim
+from services.runtime.settings import SettingsError, parse_overrides
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
@@ -62,6 +63,13 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("file", type=Path, help="an MCAP recording made by `harvest run`")
     p.add_argument("--services", required=True, help="comma-separated service names")
+    p.add_argument(
+        "--set",
+        action="append",
+        metavar="SERVICE.KEY=VALUE",
+        help="change a setting of a service under resim, on top of its recorded settings "
+        "(e.g. to see what a new threshold changes); repeatable",
+    )
     p.add_argument("--timeout", type=float, default=10.0, help="wait per output, s")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=cmd_resim)
@@ -110,21 +118,23 @@ def cmd_replay(args: argparse.Namespace) -> int:
 def cmd_resim(args: argparse.Namespace) -> int:
     names = [n.strip() for n in args.services.split(",") if n.strip()]
     try:
+        overrides = parse_overrides(args.set)
         with Progress(transient=True, disable=args.json) as bar:
             task = bar.add_task("resim", total=None)
             report = resim(
                 args.file,
                 names,
                 args.timeout,
+                overrides,
                 progress=lambda i, n: bar.update(task, completed=i + 1, total=n),
             )
-    except (RecordingError, ResimError, UnknownServiceError, BusError) as exc:
+    except (RecordingError, ResimError, UnknownServiceError, BusError, SettingsError) as exc:
         print(f"harvest resim: {exc}", file=sys.stderr)
         return 1
     if args.json:
         print(json.dumps(report.to_json(), indent=2))
         return 0 if report.ok else 1
-    con = Console()
+    con = console()
     t = Table(title=f"resim {', '.join(names)} on {args.file}")
     for col in ("topic", "recorded", "identical", "different", "missing", "extra"):
         t.add_column(col, justify="left" if col == "topic" else "right")

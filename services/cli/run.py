@@ -10,6 +10,7 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
+from services.cli.ui import console
 from services.recorder.inspect import RecordingError, read_info
 from services.runtime.settings import SettingsError, parse_overrides
 from services.supervisor.stack import StackError, load_stack
@@ -45,12 +46,12 @@ def new_run_id() -> str:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    console = Console(stderr=False)
+    con = console()
     try:
         overrides = parse_overrides(args.set)
         stack = load_stack(args.stack, args.profile, overrides)
     except (StackError, SettingsError) as exc:
-        console.print(f"[red]refused to start:[/] {exc}")
+        con.print(f"[red]refused to start:[/] {exc}")
         return 2
     updates: dict[str, object] = {}
     if args.no_record:
@@ -63,9 +64,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     try:
         result = sup.run()
     except StackError as exc:
-        console.print(f"[red]refused to start:[/] {exc}")
+        con.print(f"[red]refused to start:[/] {exc}")
         return 2
-    print_summary(console, result)
+    print_summary(con, result)
     return result.exit_code
 
 

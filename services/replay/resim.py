@@ -20,6 +20,7 @@ from services.replay.player import OutputCollector, Player, PlayStats
 from services.runtime.lockstep import LockstepPlan
 from services.runtime.spec import answer_closure
 from services.supervisor.process import LogSink, ManagedProcess
+from services.supervisor.stack import deep_merge
 
 
 @dataclass
@@ -67,16 +68,19 @@ class ResimError(RuntimeError):
     """Resim could not run (services did not start, bad recording)."""
 
 
-def _recorded_settings(info: RecordingInfo, names: list[str], warn: list[str]) -> dict[str, str]:
+def _recorded_settings(
+    info: RecordingInfo, names: list[str], warn: list[str], overrides: dict[str, dict[str, Any]]
+) -> dict[str, str]:
+    """Each service's settings as recorded, with ``overrides`` (service → settings) on top."""
     recorded = info.run_json("services", {}) or {}
     assert isinstance(recorded, dict)
     out = {}
     for n in names:
-        if n in recorded:
-            out[n] = json.dumps(recorded[n])
-        else:
+        base = recorded.get(n)
+        if base is None:
             warn.append(f"{n}: no recorded settings; using its defaults")
-            out[n] = "{}"
+            base = {}
+        out[n] = json.dumps(deep_merge(base, overrides.get(n, {})))
     return out
 
 
@@ -96,6 +100,7 @@ def resim(
     path: Path,
     names: list[str],
     timeout_s: float = 10.0,
+    overrides: dict[str, dict[str, Any]] | None = None,
     sink: LogSink | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> ResimReport:
@@ -106,7 +111,10 @@ def resim(
         raise ResimError("resim runs services with a core; the recorder/router cannot be resimmed")
     outputs = sorted({t for d in defs for t in d.spec.outputs})
     listened = {t for d in defs for t in d.spec.inputs}
-    settings = _recorded_settings(info, names, warn)
+    unknown = set(overrides or {}) - set(names)
+    if unknown:
+        raise ResimError(f"--set names services not under resim: {', '.join(sorted(unknown))}")
+    settings = _recorded_settings(info, names, warn, overrides or {})
     masters = [d.name for d in defs if d.kind == "source"]
     plans = {m: _master_plan(info, m, names) for m in masters}
     for plan in plans.values():

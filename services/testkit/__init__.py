@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from schemas.topics import TOPICS
-from services.runtime.node import Output, InputOrder
+from services.runtime.node import InputOrder, Output
 from services.runtime.service import ServiceDef
 from services.runtime.settings import ServiceSettings, load_settings
 
@@ -54,9 +54,12 @@ class FakeNode:
         return out
 
 
-def run_source(sd: ServiceDef, settings: ServiceSettings | None,
-               respond: Callable[[str, Any], Sequence[Output]], max_ticks: int = 10_000,
-               ) -> list[Emitted]:
+def run_source(
+    sd: ServiceDef,
+    settings: ServiceSettings | None,
+    respond: Callable[[str, Any], Sequence[Output]],
+    max_ticks: int = 10_000,
+) -> list[Emitted]:
     """Drive a clock-master core in lock-step with ``respond`` standing in for its consumers."""
     assert sd.make_core is not None
     core = sd.make_core(settings or load_settings(sd.settings, service=sd.name))
@@ -101,8 +104,12 @@ def check_seq_counts_up(outputs: Sequence[Emitted]) -> None:
         assert s == list(range(len(s))), f"{t}: seq {s[:10]}... is not 0, 1, 2, ..."
 
 
-def check_stamps_carried(sd: ServiceDef, inputs: Sequence[Output],
-                         outputs: Sequence[Emitted], dropped: Sequence[int] = ()) -> None:
+def check_stamps_carried(
+    sd: ServiceDef,
+    inputs: Sequence[Output],
+    outputs: Sequence[Emitted],
+    dropped: Sequence[int] = (),
+) -> None:
     """Each answered input gets exactly one message per answer topic, with its stamp and seq."""
     for i, (topic, msg) in enumerate(inputs):
         if i in dropped:
@@ -116,8 +123,9 @@ def check_stamps_carried(sd: ServiceDef, inputs: Sequence[Output],
             assert h.source == sd.name, f"{ans} header.source {h.source!r} != {sd.name!r}"
 
 
-def check_deterministic(sd: ServiceDef, settings: ServiceSettings | None,
-                        inputs: Sequence[Output]) -> None:
+def check_deterministic(
+    sd: ServiceDef, settings: ServiceSettings | None, inputs: Sequence[Output]
+) -> None:
     """Two fresh cores fed the same inputs give byte-identical outputs."""
     runs = []
     for _ in range(2):

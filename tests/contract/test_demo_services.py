@@ -13,8 +13,15 @@ from tests.unit.test_schemas import header
 
 
 def ticks(n: int) -> list[tuple[str, DemoTick]]:
-    return [("demo/tick", DemoTick(header=header(stamp_ns=10 * i, seq=i, source="demo_clock"),
-                                   tick=i, value=0.1 * i)) for i in range(n)]
+    return [
+        (
+            "demo/tick",
+            DemoTick(
+                header=header(stamp_ns=10 * i, seq=i, source="demo_clock"), tick=i, value=0.1 * i
+            ),
+        )
+        for i in range(n)
+    ]
 
 
 def test_worker_contract() -> None:
@@ -38,15 +45,18 @@ def test_kit_catches_a_service_that_does_not_carry_stamps(monkeypatch: pytest.Mo
 
     original = worker_core.DemoWorkerCore.handle
 
-    def bad(self, topic, msg):  # noqa: ANN001, ANN202
-        (t, ans), = original(self, topic, msg)
+    def bad(self, topic, msg):
+        ((t, ans),) = original(self, topic, msg)
         h = ans.header.model_copy(update={"stamp_ns": ans.header.stamp_ns + 1})
         return [(t, ans.model_copy(update={"header": h}))]
 
     monkeypatch.setattr(worker_core.DemoWorkerCore, "handle", bad)
     with pytest.raises(AssertionError, match="copy the input stamp"):
-        assert_contract(ContractCase(WORKER, load_settings(WORKER.settings, {"max_delay_ms": 0}),
-                                     inputs=ticks(3)))
+        assert_contract(
+            ContractCase(
+                WORKER, load_settings(WORKER.settings, {"max_delay_ms": 0}), inputs=ticks(3)
+            )
+        )
 
 
 def test_clock_in_lockstep_with_a_fake_worker_is_deterministic() -> None:
@@ -56,7 +66,7 @@ def test_clock_in_lockstep_with_a_fake_worker_is_deterministic() -> None:
     def run() -> list[bytes]:
         worker = FakeNode(WORKER, wsettings)
 
-        def respond(topic, msg):  # noqa: ANN001, ANN202
+        def respond(topic, msg):
             return [(o.topic, o.msg) for o in worker.feed([(topic, msg)])]
 
         return [o.msg.model_dump_json().encode() for o in run_source(CLOCK, settings, respond)]

@@ -80,14 +80,24 @@ def test_status_counts_and_rejects_malformed_payloads(bus_env: BusEnv) -> None:
     pub = me.publisher("demo/tick")
     pub.put(tick(0))
     me.put_raw("demo/tick", b"\x00\x01 not json", "application/json;DemoTick")
-    me.put_raw("demo/tick", b'{"header": {"stamp_ns": 5, "seq": 1, "source": "x"}, "tick": -3, '
-                            b'"value": 1.0}', "application/json;DemoTick")
-    me.put_raw("demo/tick", b'{"header": {"stamp_ns": 5, "seq": 1, "source": "x"}, "tick": 1, '
-                            b'"value": 1.0, "surprise": 1}', "application/json;DemoTick")
+    me.put_raw(
+        "demo/tick",
+        b'{"header": {"stamp_ns": 5, "seq": 1, "source": "x"}, "tick": -3, "value": 1.0}',
+        "application/json;DemoTick",
+    )
+    me.put_raw(
+        "demo/tick",
+        b'{"header": {"stamp_ns": 5, "seq": 1, "source": "x"}, "tick": 1, '
+        b'"value": 1.0, "surprise": 1}',
+        "application/json;DemoTick",
+    )
     pub.put(tick(1))
     wait_until(lambda: len(inbox) == 2, 10, "answers to the two valid ticks")
-    status = wait_until(lambda: [s for s in me.query_status("demo_worker")
-                                 if s.topics["demo/tick"].rejected == 3], 5, "3 rejections")
+    status = wait_until(
+        lambda: [s for s in me.query_status("demo_worker") if s.topics["demo/tick"].rejected == 3],
+        5,
+        "3 rejections",
+    )
     st = status[0]  # type: ignore[index]
     c = st.topics["demo/tick"]
     assert (c.received, c.rejected, c.last_seq) == (2, 3, 1)
@@ -130,8 +140,12 @@ def test_unknown_topic_cannot_be_published(bus_env: BusEnv) -> None:
 
 
 def test_endpoint_already_in_use_is_a_clear_error(bus_env: BusEnv) -> None:
-    r = subprocess.run([sys.executable, "-m", "services.router", "-l", bus_env.endpoint],
-                       capture_output=True, text=True, timeout=30)
+    r = subprocess.run(
+        [sys.executable, "-m", "services.router", "-l", bus_env.endpoint],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     assert r.returncode == 2
     assert "address already in use" in r.stderr
 

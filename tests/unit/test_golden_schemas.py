@@ -11,8 +11,10 @@ from schemas import export
 
 def test_schemas_match_their_golden_files() -> None:
     changed = export.diff_golden()
-    assert not changed, (f"schemas changed without their golden files: {changed}; if deliberate "
-                         "run `python -m schemas.export --write` and commit schemas/golden/")
+    assert not changed, (
+        f"schemas changed without their golden files: {changed}; if deliberate "
+        "run `python -m schemas.export --write` and commit schemas/golden/"
+    )
 
 
 def test_a_changed_schema_is_detected(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -11,18 +11,30 @@ from services.runtime.node import InputOrder
 from services.runtime.spec import NodeSpec, answer_closure
 
 CHAIN = [
-    NodeSpec(inputs=("camera/rgbd",), outputs=("perception/detections",),
-             answers={"camera/rgbd": ("perception/detections",)}),
-    NodeSpec(inputs=("perception/detections",), outputs=("perception/tracks",),
-             answers={"perception/detections": ("perception/tracks",)}),
-    NodeSpec(inputs=("perception/tracks", "camera/rgbd"), outputs=("scene/state",),
-             answers={"perception/tracks": ("scene/state",)}),
+    NodeSpec(
+        inputs=("camera/rgbd",),
+        outputs=("perception/detections",),
+        answers={"camera/rgbd": ("perception/detections",)},
+    ),
+    NodeSpec(
+        inputs=("perception/detections",),
+        outputs=("perception/tracks",),
+        answers={"perception/detections": ("perception/tracks",)},
+    ),
+    NodeSpec(
+        inputs=("perception/tracks", "camera/rgbd"),
+        outputs=("scene/state",),
+        answers={"perception/tracks": ("scene/state",)},
+    ),
 ]
 
 
 def test_closure_follows_answers_transitively() -> None:
     assert answer_closure("camera/rgbd", CHAIN) == (
-        "perception/detections", "perception/tracks", "scene/state")
+        "perception/detections",
+        "perception/tracks",
+        "scene/state",
+    )
     assert answer_closure("robot/joint_state", CHAIN) == ()
 
 

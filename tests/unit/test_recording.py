@@ -18,7 +18,8 @@ from tests.unit.test_schemas import header, make_frame
 
 def tick(i: int) -> bytes:
     return TOPICS["demo/tick"].codec.encode(
-        DemoTick(header=header(stamp_ns=1000 * i, seq=i), tick=i, value=0.5))
+        DemoTick(header=header(stamp_ns=1000 * i, seq=i), tick=i, value=0.5)
+    )
 
 
 def test_channels_schemas_and_stamps() -> None:
@@ -37,8 +38,10 @@ def test_channels_schemas_and_stamps() -> None:
     schemas = {s.name: s for s in summary.schemas.values()}
     assert schemas["DemoTick"].encoding == "jsonschema"
     assert json.loads(schemas["DemoTick"].data)["title"] == "DemoTick"
-    msgs = [(c.topic, m.log_time, m.publish_time, m.sequence, c.message_encoding)
-            for _, c, m in r.iter_messages(log_time_order=False)]
+    msgs = [
+        (c.topic, m.log_time, m.publish_time, m.sequence, c.message_encoding)
+        for _, c, m in r.iter_messages(log_time_order=False)
+    ]
     assert msgs[:3] == [("demo/tick", 5_000 + i, 1000 * i, i, "json") for i in range(3)]
     assert msgs[3][0] == "camera/rgbd" and msgs[3][4] == "x-harvest-rgbd"
     assert [m.metadata for m in r.iter_metadata()] == [{"run_id": "r1"}]

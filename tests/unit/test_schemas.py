@@ -61,8 +61,9 @@ def _flatten(tp: object) -> list[object]:
     return [x for a in args for x in _flatten(a)]
 
 
-@pytest.mark.parametrize("model", sorted(_all_model_classes(), key=lambda m: m.__name__),
-                         ids=lambda m: m.__name__)
+@pytest.mark.parametrize(
+    "model", sorted(_all_model_classes(), key=lambda m: m.__name__), ids=lambda m: m.__name__
+)
 def test_every_model_is_documented_frozen_and_strict(model: type[BaseModel]) -> None:
     doc = (model.__doc__ or "").strip()
     assert doc and "\n" not in doc, f"{model.__name__} needs a one-line docstring"
@@ -100,19 +101,38 @@ def test_inverted_box_is_rejected_with_the_field_named() -> None:
 
 def test_joint_state_lengths_must_agree() -> None:
     with pytest.raises(ValidationError, match="names but"):
-        JointState.model_validate({"header": header().model_dump(), "arms": {"cutter": {
-            "names": ["a", "b"], "position_rad": [0.0], "velocity_rad_s": [0.0, 0.0]}}})
+        JointState.model_validate(
+            {
+                "header": header().model_dump(),
+                "arms": {
+                    "cutter": {
+                        "names": ["a", "b"],
+                        "position_rad": [0.0],
+                        "velocity_rad_s": [0.0, 0.0],
+                    }
+                },
+            }
+        )
 
 
 def test_arms_are_keyed_by_role() -> None:
     with pytest.raises(ValidationError):
-        JointState.model_validate({"header": header().model_dump(), "arms": {"left": {
-            "names": ["a"], "position_rad": [0.0], "velocity_rad_s": [0.0]}}})
+        JointState.model_validate(
+            {
+                "header": header().model_dump(),
+                "arms": {"left": {"names": ["a"], "position_rad": [0.0], "velocity_rad_s": [0.0]}},
+            }
+        )
 
 
 def test_json_round_trip_is_byte_stable() -> None:
-    d = Detections(header=header(answers_seq=3), image_width_px=640, image_height_px=480,
-                   detector="hsv", detections=(Detection(xyxy_px=(1, 2, 3, 4), score=0.9),))
+    d = Detections(
+        header=header(answers_seq=3),
+        image_width_px=640,
+        image_height_px=480,
+        detector="hsv",
+        detections=(Detection(xyxy_px=(1, 2, 3, 4), score=0.9),),
+    )
     codec = TOPICS["perception/detections"].codec
     payload = codec.encode(d)
     assert codec.decode(payload) == d
@@ -129,8 +149,21 @@ def test_topic_map_and_schema_names() -> None:
 
 
 UNIT_SUFFIXES = ("_m", "_rad", "_s", "_ns", "_ms", "_px", "_m_s", "_rad_s", "_frames", "_xyzw")
-PHYSICAL_WORDS = {"position", "velocity", "distance", "radius", "depth", "time", "stamp", "error",
-                  "speed", "semi", "center", "orientation", "duration"}
+PHYSICAL_WORDS = {
+    "position",
+    "velocity",
+    "distance",
+    "radius",
+    "depth",
+    "time",
+    "stamp",
+    "error",
+    "speed",
+    "semi",
+    "center",
+    "orientation",
+    "duration",
+}
 NOT_PHYSICAL = {"depth_encoding", "stamp_ns"}
 
 
@@ -152,15 +185,19 @@ def _property_names(schema: dict) -> set[str]:
 def test_rgbd_frame_meta_requires_a_frame_id() -> None:
     intr = CameraIntrinsics(width_px=4, height_px=2, fx_px=1, fy_px=1, cx_px=2, cy_px=1)
     with pytest.raises(ValidationError, match="frame_id"):
-        RgbdFrameMeta(header=header(frame_id=""), intrinsics=intr,
-                      T_world_camera=Pose(position_m=(0, 0, 0)))
+        RgbdFrameMeta(
+            header=header(frame_id=""), intrinsics=intr, T_world_camera=Pose(position_m=(0, 0, 0))
+        )
 
 
 def make_frame(w: int = 8, h: int = 6, seed: int = 0) -> RgbdFrame:
     rng = np.random.default_rng(seed)
     intr = CameraIntrinsics(width_px=w, height_px=h, fx_px=5, fy_px=5, cx_px=w / 2, cy_px=h / 2)
-    meta = RgbdFrameMeta(header=header(frame_id="camera_optical"), intrinsics=intr,
-                         T_world_camera=Pose(position_m=(0, 0, 1)))
+    meta = RgbdFrameMeta(
+        header=header(frame_id="camera_optical"),
+        intrinsics=intr,
+        T_world_camera=Pose(position_m=(0, 0, 1)),
+    )
     rgb = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
     depth = rng.integers(0, 65535, (h, w), dtype=np.uint16)
     return RgbdFrame(meta, rgb, depth)

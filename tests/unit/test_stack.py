@@ -53,7 +53,7 @@ def test_bad_field_is_named(tmp_path: Path) -> None:
     with pytest.raises(StackError, match="field 'mode'"):
         load_stack(p)
     p = write(tmp_path, GOOD.replace("demo_worker: {}", "demo_worker: {restrat: never}"))
-    with pytest.raises(StackError, match="services.demo_worker.restrat"):
+    with pytest.raises(StackError, match=r"services\.demo_worker\.restrat"):
         load_stack(p)
 
 
@@ -77,8 +77,14 @@ def test_master_must_be_a_service(tmp_path: Path) -> None:
 
 def test_lockstep_plan_and_orders(tmp_path: Path) -> None:
     stack = load_stack(write(tmp_path, GOOD))
-    sup = Supervisor(stack.model_copy(update={"recording": stack.recording.model_copy(
-        update={"dir": tmp_path})}), Path("x"), "run-test", quiet=True)
+    sup = Supervisor(
+        stack.model_copy(
+            update={"recording": stack.recording.model_copy(update={"dir": tmp_path})}
+        ),
+        Path("x"),
+        "run-test",
+        quiet=True,
+    )
     sup._build_children()
     plan = sup.lockstep_plan()
     assert plan.wait == {"demo/tick": ("demo/answer",)}
