@@ -21,14 +21,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "latency of ~200-byte messages at 1 kHz and 640x480 RGB-D frames at "
         "30 Hz through our bus and raw zenoh-python; recorder CPU at 15 Hz.",
     )
-    b.add_argument("--seconds", type=float, default=5.0, help="duration of each measurement")
+    b.add_argument("--seconds", type=float, default=3.0, help="duration of each measurement")
+    b.add_argument("--rounds", type=int, default=3, help="repetitions, ours and raw interleaved")
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(func=cmd_bench_bus)
 
 
 def cmd_bench_bus(args: argparse.Namespace) -> int:
-    from services.bench.bus import run_bus_bench, table
+    from services.bus.bench import run_bus_bench, table
 
-    result = run_bus_bench(args.seconds, progress=not args.json)
+    result = run_bus_bench(args.seconds, args.rounds, progress=not args.json)
     print(json.dumps(result, indent=2) if args.json else table(result))
     return 0

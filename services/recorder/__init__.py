@@ -18,6 +18,9 @@ class Settings(ServiceSettings):
     compression: Literal["lz4", "zstd", "none"] = Field(
         default="lz4", description="Chunk compression (lz4: ~3 ms per RGB-D frame; zstd: ~9)."
     )
+    lz4_level: int = Field(
+        default=0, ge=-16, le=16, description="lz4 level; negative trades ratio for speed."
+    )
     chunk_size_bytes: int = Field(default=4 << 20, ge=1024, description="MCAP chunk size.")
     flush_interval_s: float = Field(
         default=0.5,

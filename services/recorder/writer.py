@@ -7,20 +7,13 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
-from typing import IO, Literal
-
-from mcap.writer import CompressionType, Writer
+from typing import IO
 
 from schemas.codec import DecodeError
 from schemas.topics import TOPICS
 from services import __version__
+from services.recorder.mcap_writer import Compression, LeanMcapWriter
 
-Compression = Literal["lz4", "zstd", "none"]
-_COMPRESSION = {
-    "lz4": CompressionType.LZ4,
-    "zstd": CompressionType.ZSTD,
-    "none": CompressionType.NONE,
-}
 REJECTED_PREFIX = "_rejected/"
 RUN_METADATA = "run"
 
@@ -38,14 +31,13 @@ class RunWriter:
     stream: IO[bytes]
     compression: Compression = "lz4"
     chunk_size: int = 4 << 20
+    lz4_level: int = 0
     stats: dict[str, ChannelStats] = field(default_factory=dict)
     rejected: int = 0
     unknown: int = 0
 
     def __post_init__(self) -> None:
-        self._w = Writer(
-            self.stream, chunk_size=self.chunk_size, compression=_COMPRESSION[self.compression]
-        )
+        self._w = LeanMcapWriter(self.stream, self.chunk_size, self.compression, self.lz4_level)
         self._w.start(profile="", library=f"orange-harvest recorder {__version__}")
         self._channels: dict[str, int] = {}
         self._schemas: dict[str, int] = {}
