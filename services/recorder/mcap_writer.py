@@ -212,7 +212,7 @@ class LeanMcapWriter:
         b = RecordBuilder()
         offsets: list[SummaryOffset] = []
 
-        def group(opcode: Opcode, records: list) -> None:  # type: ignore[type-arg]
+        def group(opcode: Opcode, records: list) -> None:
             g0 = b.count
             for r in records:
                 r.write(b)
