@@ -22,8 +22,10 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     stale = [str(p) for p, text in files.items() if not p.exists() or p.read_text() != text]
     if stale:
-        print(f"out of date: {', '.join(stale)}; run python -m services.robot --write",
-              file=sys.stderr)
+        print(
+            f"out of date: {', '.join(stale)}; run python -m services.robot --write",
+            file=sys.stderr,
+        )
         return 1
     print("deploy/robot matches the generator")
     return 0

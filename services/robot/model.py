@@ -32,13 +32,13 @@ CAMERA_FRAME = "camera_optical"
 class Mount:
     """Where the arm bases and the camera sit on the torso."""
 
-    shoulder_x_m: float = 0.09
-    shoulder_y_m: float = 0.22  # |y| of each arm base
-    shoulder_z_m: float = 1.32
-    shoulder_tilt_deg: float = 47.0  # base z axis: sideways, turned forward by this angle
-    shoulder_droop_deg: float = -8.0  # ... and turned down by this angle (negative: up)
-    camera_xyz_m: tuple[float, float, float] = (0.09, 0.0, 1.45)
-    camera_pitch_down_deg: float = 12.0
+    shoulder_x_m: float = 0.01
+    shoulder_y_m: float = 0.17  # |y| of each arm base
+    shoulder_z_m: float = 1.16
+    shoulder_tilt_deg: float = 33.0  # base z axis: sideways, turned forward by this angle
+    shoulder_droop_deg: float = 33.0  # ... and turned down by this angle
+    camera_xyz_m: tuple[float, float, float] = (0.02, 0.0, 1.44)
+    camera_pitch_down_deg: float = 8.0
 
 
 @dataclass(frozen=True)
@@ -76,8 +76,9 @@ def velocity_limits_rad_s() -> tuple[float, ...]:
     return tuple(math.radians(d) for d in LWR_VEL_LIMIT_DEG_S)
 
 
-# A comfortable posture: elbows bent (j4 away from the singularity), tools forward.
+# Ready posture: tools forward under the camera's view (cutter tip at (0.55, 0, 1.05) m, the dish
+# 0.14 m below it), every joint at least 15 degrees inside its limits (IK, services/robot/reach).
 HOME_RAD: dict[ArmRole, tuple[float, ...]] = {
-    "cutter": (0.0, 0.0, 0.0, 0.6, 0.0, 0.0, 0.0),
-    "collector": (0.0, 0.0, 0.0, 0.6, 0.0, 0.0, 0.0),
+    "cutter": (-0.391, -1.736, 0.585, 1.786, -0.984, 1.832, 0.199),
+    "collector": (-0.892, -1.166, 0.023, 1.722, -1.247, 1.084, -0.695),
 }

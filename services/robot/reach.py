@@ -55,8 +55,9 @@ class ReachSolver:
                 self.robot.set_joint(name, v)
         self.robot.update_kinematics()
 
-    def solve(self, p_tip_world: np.ndarray, yaw_rad: float = 0.0,
-              iters: int = 250) -> tuple[float, float]:
+    def solve(
+        self, p_tip_world: np.ndarray, yaw_rad: float = 0.0, iters: int = 250
+    ) -> tuple[float, float]:
         """IK of the harvest pose. The cutter points forward (tool axis horizontal) turned by
         ``yaw_rad`` about the world vertical (the paper's free θ_a, sampled by ``reach``); the dish
         is ``BASKET_BELOW_M`` under the tip, opening up, its rotation about its own normal free.
@@ -72,11 +73,13 @@ class ReachSolver:
         pos.configure("tip", "soft", 1.0)
         ori = s.add_orientation_task(TOOL_FRAME["cutter"], R)
         ori.configure("tip_ori", "soft", 1.0)
-        rpos = s.add_relative_position_task(TOOL_FRAME["cutter"], TOOL_FRAME["collector"],
-                                            _basket_offset())
+        rpos = s.add_relative_position_task(
+            TOOL_FRAME["cutter"], TOOL_FRAME["collector"], _basket_offset()
+        )
         rpos.configure("rel", "soft", 1.0)
-        rori = s.add_relative_orientation_task(TOOL_FRAME["cutter"], TOOL_FRAME["collector"],
-                                               _BASKET_IN_CUTTER)
+        rori = s.add_relative_orientation_task(
+            TOOL_FRAME["cutter"], TOOL_FRAME["collector"], _BASKET_IN_CUTTER
+        )
         rori.configure("rel_ori", "soft", 1.0)
         rori.mask.set_axises("yz", "local")  # free about cutter x = the dish normal
         sc = s.add_avoid_self_collisions_constraint()
@@ -100,17 +103,22 @@ class ReachSolver:
         rel_err += 0.1 * math.acos(max(-1.0, min(1.0, normal[2])))  # dish normal vs up, rad
         return pos_err, rel_err
 
-    def reach(self, fruit_world_m: np.ndarray, yaws_deg: tuple[float, ...] = (0, -25, 25, -50, 50),
-              tol_m: float = 0.005) -> ReachResult:
+    def reach(
+        self,
+        fruit_world_m: np.ndarray,
+        yaws_deg: tuple[float, ...] = (0, -25, 25, -50, 50),
+        tol_m: float = 0.005,
+    ) -> ReachResult:
         tip = fruit_world_m + np.array([0, 0, PEDUNCLE_ABOVE_M])
-        best = (math.inf, math.inf, None)
+        fruit = (float(fruit_world_m[0]), float(fruit_world_m[1]), float(fruit_world_m[2]))
+        best = (math.inf, math.inf)
         for yaw in yaws_deg:
             pe, re = self.solve(tip, math.radians(yaw))
             if pe < tol_m and re < tol_m:
-                return ReachResult(tuple(fruit_world_m), True, yaw, pe, re)
-            if pe + re < best[0] + best[1]:
-                best = (pe, re, yaw)
-        return ReachResult(tuple(fruit_world_m), False, None, best[0], best[1])
+                return ReachResult(fruit, True, yaw, pe, re)
+            if pe + re < sum(best):
+                best = (pe, re)
+        return ReachResult(fruit, False, None, *best)
 
     def fruit_in_camera(self, depth_m: float, x_cam_m: float, y_cam_m: float) -> np.ndarray:
         p = self.T_world_cam @ np.array([x_cam_m, y_cam_m, depth_m, 1.0])
@@ -139,8 +147,7 @@ def _log3(R: np.ndarray) -> np.ndarray:
 def grid(solver: ReachSolver) -> list[np.ndarray]:
     """Fruit in the camera's view: depth 0.4–0.9 m, lateral and vertical spread in the image."""
     out = []
-    for depth, u, v in itertools.product((0.4, 0.55, 0.7, 0.9), (-0.35, 0, 0.35),
-                                         (-0.2, 0.0, 0.2)):
+    for depth, u, v in itertools.product((0.4, 0.55, 0.7, 0.9), (-0.35, 0, 0.35), (-0.2, 0.0, 0.2)):
         out.append(solver.fruit_in_camera(depth, u * depth, v * depth))
     return out
 
@@ -150,8 +157,10 @@ def main() -> int:
     res = [s.reach(p) for p in grid(s)]
     for r in res:
         x, y, z = r.fruit_world_m
-        print(f"fruit ({x:5.2f} {y:5.2f} {z:5.2f})  {'ok ' if r.reached else 'NO '}"
-              f"yaw {r.yaw_deg}  pos {r.pos_err_m * 1e3:6.1f} mm  rel {r.rel_err_m * 1e3:6.1f} mm")
+        print(
+            f"fruit ({x:5.2f} {y:5.2f} {z:5.2f})  {'ok ' if r.reached else 'NO '}"
+            f"yaw {r.yaw_deg}  pos {r.pos_err_m * 1e3:6.1f} mm  rel {r.rel_err_m * 1e3:6.1f} mm"
+        )
     n = sum(r.reached for r in res)
     print(f"{n}/{len(res)} reachable")
     return 0 if n == len(res) else 1

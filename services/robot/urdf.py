@@ -17,6 +17,7 @@ import numpy as np
 
 from schemas.base import ARM_ROLES, ArmRole
 from services.robot.model import (
+    CAMERA_FRAME,
     LWR_AXES,
     LWR_LINK_RADIUS_M,
     LWR_OFFSETS_M,
@@ -25,13 +26,18 @@ from services.robot.model import (
     MOUNT,
     SIDE,
     TOOLS,
-    CAMERA_FRAME as CAMERA_OPTICAL,
     Mount,
     ToolGeometry,
 )
 
-COLOURS = {"body": (0.75, 0.75, 0.78, 1), "arm": (0.95, 0.55, 0.1, 1), "dark": (0.2, 0.2, 0.22, 1),
-           "tool": (0.1, 0.1, 0.1, 1), "basket": (0.95, 0.85, 0.2, 1), "camera": (0.1, 0.1, 0.3, 1)}
+COLOURS = {
+    "body": (0.75, 0.75, 0.78, 1),
+    "arm": (0.95, 0.55, 0.1, 1),
+    "dark": (0.2, 0.2, 0.22, 1),
+    "tool": (0.1, 0.1, 0.1, 1),
+    "basket": (0.95, 0.85, 0.2, 1),
+    "camera": (0.1, 0.1, 0.3, 1),
+}
 
 
 def rot_x(a: float) -> np.ndarray:
@@ -86,12 +92,21 @@ def _xyz(v: tuple[float, ...] | np.ndarray) -> str:
 class _Urdf:
     lines: list[str] = field(default_factory=list)
 
-    def link(self, name: str, mass: float = 0.001, shapes: list[str] | None = None,
-             colour: str = "body", collide: bool = True, visual: bool = True) -> None:
+    def link(
+        self,
+        name: str,
+        mass: float = 0.001,
+        shapes: list[str] | None = None,
+        colour: str = "body",
+        collide: bool = True,
+        visual: bool = True,
+    ) -> None:
         i = max(mass * 1e-2, 1e-6)
         self.lines.append(f'  <link name="{name}">')
-        self.lines.append(f'    <inertial><mass value="{_f(mass)}"/><inertia ixx="{_f(i)}" '
-                          f'ixy="0" ixz="0" iyy="{_f(i)}" iyz="0" izz="{_f(i)}"/></inertial>')
+        self.lines.append(
+            f'    <inertial><mass value="{_f(mass)}"/><inertia ixx="{_f(i)}" '
+            f'ixy="0" ixz="0" iyy="{_f(i)}" iyz="0" izz="{_f(i)}"/></inertial>'
+        )
         for shape in shapes or []:
             if visual:
                 self.lines.append(f'    <visual>{shape}<material name="{colour}"/></visual>')
@@ -99,23 +114,37 @@ class _Urdf:
                 self.lines.append(f"    <collision>{shape}</collision>")
         self.lines.append("  </link>")
 
-    def fixed(self, name: str, parent: str, child: str, xyz: tuple[float, ...] | np.ndarray,
-              rpy: tuple[float, ...] = (0, 0, 0)) -> None:
-        self.lines.append(f'  <joint name="{name}" type="fixed"><parent link="{parent}"/>'
-                          f'<child link="{child}"/><origin xyz="{_xyz(xyz)}" '
-                          f'rpy="{_xyz(rpy)}"/></joint>')
+    def fixed(
+        self,
+        name: str,
+        parent: str,
+        child: str,
+        xyz: tuple[float, ...] | np.ndarray,
+        rpy: tuple[float, ...] = (0, 0, 0),
+    ) -> None:
+        self.lines.append(
+            f'  <joint name="{name}" type="fixed"><parent link="{parent}"/>'
+            f'<child link="{child}"/><origin xyz="{_xyz(xyz)}" '
+            f'rpy="{_xyz(rpy)}"/></joint>'
+        )
 
 
-def cylinder(r: float, length: float, xyz: tuple[float, ...] = (0, 0, 0),
-             rpy: tuple[float, ...] = (0, 0, 0)) -> str:
-    return (f'<origin xyz="{_xyz(xyz)}" rpy="{_xyz(rpy)}"/><geometry><cylinder '
-            f'radius="{_f(r)}" length="{_f(length)}"/></geometry>')
+def cylinder(
+    r: float, length: float, xyz: tuple[float, ...] = (0, 0, 0), rpy: tuple[float, ...] = (0, 0, 0)
+) -> str:
+    return (
+        f'<origin xyz="{_xyz(xyz)}" rpy="{_xyz(rpy)}"/><geometry><cylinder '
+        f'radius="{_f(r)}" length="{_f(length)}"/></geometry>'
+    )
 
 
-def box(size: tuple[float, ...], xyz: tuple[float, ...] = (0, 0, 0),
-        rpy: tuple[float, ...] = (0, 0, 0)) -> str:
-    return (f'<origin xyz="{_xyz(xyz)}" rpy="{_xyz(rpy)}"/><geometry><box size="{_xyz(size)}"/>'
-            f"</geometry>")
+def box(
+    size: tuple[float, ...], xyz: tuple[float, ...] = (0, 0, 0), rpy: tuple[float, ...] = (0, 0, 0)
+) -> str:
+    return (
+        f'<origin xyz="{_xyz(xyz)}" rpy="{_xyz(rpy)}"/><geometry><box size="{_xyz(size)}"/>'
+        f"</geometry>"
+    )
 
 
 def sphere(r: float, xyz: tuple[float, ...] = (0, 0, 0)) -> str:
@@ -127,16 +156,20 @@ def _body(u: _Urdf, m: Mount) -> None:
     u.link("torso", 20.0, [box((0.26, 0.34, 0.55), (0, 0, 0.275))])
     u.fixed("torso_fix", "base_link", "torso", (-0.05, 0, 0.7))
     u.link("shoulders", 5.0, [box((0.16, 2 * m.shoulder_y_m - 0.1, 0.14))])
-    u.fixed("shoulders_fix", "torso", "shoulders", (m.shoulder_x_m + 0.05, 0,
-                                                    m.shoulder_z_m - 0.7))
+    u.fixed("shoulders_fix", "torso", "shoulders", (m.shoulder_x_m + 0.05, 0, m.shoulder_z_m - 0.7))
     u.link("head", 2.0, [sphere(0.09)])
     cx, cy, cz = m.camera_xyz_m
     u.fixed("head_fix", "torso", "head", (cx - 0.06 + 0.05, cy, cz - 0.7))
     u.link("camera_link", 0.07, [box((0.025, 0.09, 0.025))], "camera", collide=False)
     u.fixed("camera_fix", "head", "camera_link", (0.06, 0, 0))
-    u.link(CAMERA_OPTICAL)
-    u.fixed("camera_optical_fix", "camera_link", CAMERA_OPTICAL, (0, 0, 0),
-            rpy_of(camera_optical_rotation(m)))
+    u.link(CAMERA_FRAME)
+    u.fixed(
+        "camera_optical_fix",
+        "camera_link",
+        CAMERA_FRAME,
+        (0, 0, 0),
+        rpy_of(camera_optical_rotation(m)),
+    )
 
 
 def _arm(u: _Urdf, role: ArmRole, m: Mount, t: ToolGeometry) -> None:
@@ -144,8 +177,13 @@ def _arm(u: _Urdf, role: ArmRole, m: Mount, t: ToolGeometry) -> None:
     base = f"{role}_base"
     r0 = LWR_LINK_RADIUS_M[0]
     u.link(base, 2.0, [cylinder(r0, LWR_OFFSETS_M[0], (0, 0, LWR_OFFSETS_M[0] / 2))], "arm")
-    u.fixed(f"{role}_mount", "shoulders", base, (0.0, side * m.shoulder_y_m, 0.0),
-            rpy_of(shoulder_rotation(role, m)))
+    u.fixed(
+        f"{role}_mount",
+        "shoulders",
+        base,
+        (0.0, side * m.shoulder_y_m, 0.0),
+        rpy_of(shoulder_rotation(role, m)),
+    )
     parent = base
     for i in range(7):
         name, link = f"{role}_j{i + 1}", f"{role}_link{i + 1}"
@@ -157,7 +195,8 @@ def _arm(u: _Urdf, role: ArmRole, m: Mount, t: ToolGeometry) -> None:
             f'  <joint name="{name}" type="revolute"><parent link="{parent}"/>'
             f'<child link="{link}"/><origin xyz="0 0 {_f(LWR_OFFSETS_M[i])}" rpy="0 0 0"/>'
             f'<axis xyz="{_xyz(LWR_AXES[i])}"/><limit lower="{_f(-lim)}" upper="{_f(lim)}" '
-            f'effort="176" velocity="{_f(vel)}"/><dynamics damping="0.5"/></joint>')
+            f'effort="176" velocity="{_f(vel)}"/><dynamics damping="0.5"/></joint>'
+        )
         parent = link
     if role == "cutter":
         _cutter_tool(u, t)
@@ -167,8 +206,12 @@ def _arm(u: _Urdf, role: ArmRole, m: Mount, t: ToolGeometry) -> None:
 
 def _cutter_tool(u: _Urdf, t: ToolGeometry) -> None:
     L, r = t.cutter_shaft_length_m, t.cutter_shaft_radius_m
-    u.link("cutter_tool", 0.4, [cylinder(r, L, (0, 0, L / 2)),
-                                box((0.006, 0.03, 0.04), (0, 0, L - 0.02))], "tool")
+    u.link(
+        "cutter_tool",
+        0.4,
+        [cylinder(r, L, (0, 0, L / 2)), box((0.006, 0.03, 0.04), (0, 0, L - 0.02))],
+        "tool",
+    )
     u.fixed("cutter_tool_fix", "cutter_link7", "cutter_tool", (0, 0, t.flange_gap_m))
     u.link("cutter_tip")
     u.fixed("cutter_tip_fix", "cutter_tool", "cutter_tip", (0, 0, L))
@@ -185,8 +228,7 @@ def _collector_tool(u: _Urdf, t: ToolGeometry) -> None:
     seg = 2 * R * math.tan(math.pi / n)
     for k in range(n):
         a = 2 * math.pi * k / n
-        shapes.append(box((0.006, seg, h), (R * math.cos(a), R * math.sin(a), h / 2),
-                          (0, 0, a)))
+        shapes.append(box((0.006, seg, h), (R * math.cos(a), R * math.sin(a), h / 2), (0, 0, a)))
     u.link("basket", 0.3, shapes, "basket")
     # Dish frame: z = dish normal = tool -x, x = tool z (forward), centre R past the shaft.
     u.fixed("basket_fix", "collector_tool", "basket", (0, 0, L + R), (0, -math.pi / 2, 0))
@@ -195,9 +237,13 @@ def _collector_tool(u: _Urdf, t: ToolGeometry) -> None:
     # One solid cylinder around the dish for the controller's collision model (13 shapes would
     # mean 13x the distance pairs). The sim turns its collisions off: fruit must fall *into*
     # the dish, whose floor and rim segments are what pybullet collides with.
-    u.link(BASKET_HULL, 0.001, [cylinder(R + 0.005, h + t.basket_floor_m,
-                                         (0, 0, (h - t.basket_floor_m) / 2))], "basket",
-           visual=False)
+    u.link(
+        BASKET_HULL,
+        0.001,
+        [cylinder(R + 0.005, h + t.basket_floor_m, (0, 0, (h - t.basket_floor_m) / 2))],
+        "basket",
+        visual=False,
+    )
     u.fixed("basket_hull_fix", "basket", BASKET_HULL, (0, 0, 0))
 
 
@@ -209,11 +255,17 @@ def generate(m: Mount = MOUNT, t: ToolGeometry = TOOLS) -> str:
     _body(u, m)
     for role in ARM_ROLES:
         _arm(u, role, m, t)
-    colours = "\n".join(f'  <material name="{k}"><color rgba="{_xyz(v)}"/></material>'
-                        for k, v in COLOURS.items())
-    return ('<?xml version="1.0"?>\n<!-- Generated by `python -m services.robot --write`; '
-            'do not edit. -->\n<robot name="bazar">\n' + colours + "\n"
-            + "\n".join(u.lines) + "\n</robot>\n")
+    colours = "\n".join(
+        f'  <material name="{k}"><color rgba="{_xyz(v)}"/></material>' for k, v in COLOURS.items()
+    )
+    return (
+        '<?xml version="1.0"?>\n<!-- Generated by `python -m services.robot --write`; '
+        'do not edit. -->\n<robot name="bazar">\n'
+        + colours
+        + "\n"
+        + "\n".join(u.lines)
+        + "\n</robot>\n"
+    )
 
 
 def collision_pairs() -> list[list[str]]:

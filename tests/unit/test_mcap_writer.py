@@ -46,19 +46,23 @@ def test_reference_reader_reads_summary_indexes_and_messages(compression: str) -
     assert only_b == list(range(0, 200, 3))
     assert [m.metadata for m in r.iter_metadata()] == [{"x": "1"}]
     buf.seek(0)
-    msgs = [rec for rec in StreamReader(buf, validate_crcs=True).records
-            if type(rec).__name__ == "Message"]
+    msgs = [
+        rec
+        for rec in StreamReader(buf, validate_crcs=True).records
+        if type(rec).__name__ == "Message"
+    ]
     assert len(msgs) == 200
 
 
-@pytest.mark.skipif(shutil.which("rerun", path=str(Path(sys.executable).parent)) is None,
-                    reason="rerun CLI not installed")
+@pytest.mark.skipif(
+    shutil.which("rerun", path=str(Path(sys.executable).parent)) is None,
+    reason="rerun CLI not installed",
+)
 def test_rerun_loader_accepts_the_file(tmp_path: Path) -> None:
     p = tmp_path / "x.mcap"
     with open(p, "wb") as f:
         _write(f)
     rerun = str(Path(sys.executable).parent / "rerun")
-    r = subprocess.run([rerun, "mcap", "check", str(p)], capture_output=True, text=True,
-                       timeout=60)
+    r = subprocess.run([rerun, "mcap", "check", str(p)], capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stdout + r.stderr
     assert "ok" in r.stdout

@@ -66,12 +66,20 @@ def test_zenoh_json5_files_load_and_flags_go_on_top() -> None:
 
     from services.bus.config import BusSettings, make_zenoh_config
 
-    s = BusSettings(config_file=Path("deploy/zenoh/client-local.json5"), namespace="ns1",
-                    connect=("tcp/127.0.0.1:9999",))
+    s = BusSettings(
+        config_file=Path("deploy/zenoh/client-local.json5"),
+        namespace="ns1",
+        connect=("tcp/127.0.0.1:9999",),
+    )
     conf = make_zenoh_config(s)
     assert json.loads(conf.get_json("transport/shared_memory/enabled")) is True
     assert json.loads(conf.get_json("connect/endpoints")) == ["tcp/127.0.0.1:9999"]
     assert json.loads(conf.get_json("namespace")) == "ns1"
     assert json.loads(conf.get_json("scouting/multicast/enabled")) is False
-    make_zenoh_config(BusSettings(mode="router", config_file=Path("deploy/zenoh/router-local.json5"),
-                                  listen=("tcp/127.0.0.1:9998",)))
+    make_zenoh_config(
+        BusSettings(
+            mode="router",
+            config_file=Path("deploy/zenoh/router-local.json5"),
+            listen=("tcp/127.0.0.1:9998",),
+        )
+    )
