@@ -90,6 +90,7 @@ class Node:
         self._cv = threading.Condition()
         self._order = InputOrder()
         self._error_log: set[str] = set()
+        self._core: Any = None  # set by the run loop; its ``counters`` (if any) go into status
         self.barrier = AnswerBarrier(self.plan.wait) if mode == "lockstep" else None
         self.bus = Bus(name, bus_settings)
         self._pubs = {k: self.bus.publisher(k) for k in spec.outputs}
@@ -126,6 +127,7 @@ class Node:
             topics={k: c.frozen() for k, c in sorted(self.bus.counters.items())},
             rejected_unknown=self.bus.rejected_unknown,
             errors=self.errors,
+            core_counters=dict(sorted(getattr(self._core, "counters", {}).items())),
         )
 
     # ---- inputs ----------------------------------------------------------------------------
@@ -191,6 +193,7 @@ class Node:
     # ---- loops -----------------------------------------------------------------------------
     def run_reactive(self, core: Core) -> None:
         """Hand every input to the core in arrival order until stopped."""
+        self._core = core
         while not self.stop_event.is_set():
             item = self.next_input(timeout_s=0.2)
             if item is not None:

@@ -1,0 +1,148 @@
+"""Scripted 2D RGB-D scenes with known fruit boxes and IDs, for tests of the perception chain.
+
+Not a simulator: a seeded picture of a canopy (leaf ellipses, branches) with shaded orange
+discs at known depths, a hand-like occluder that sweeps across, an optional fruit that is moved,
+and leaves that sway in front of fruit. Each frame comes with the truth: per fruit its ID, the
+visible box, the visible fraction, and whether an occlusion event is active.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from schemas.base import Header, Pose
+from schemas.camera import CameraIntrinsics, RgbdFrame, RgbdFrameMeta
+
+FRAME_PERIOD_NS = 66_666_667  # 15 Hz
+
+
+@dataclass(frozen=True)
+class FruitView:
+    fruit_id: int
+    box_xyxy_px: tuple[float, float, float, float] | None
+    visible_fraction: float
+
+
+@dataclass(frozen=True)
+class SceneFrame:
+    frame: RgbdFrame
+    fruits: tuple[FruitView, ...]
+    occluder_active: bool
+
+
+class Scene2D:
+    """A seeded scene; ``frame(k)`` renders frame k (any order, same result)."""
+
+    def __init__(
+        self,
+        seed: int = 0,
+        n_fruit: int = 8,
+        width_px: int = 640,
+        height_px: int = 480,
+        sweep: tuple[int, int] | None = (20, 60),
+        move: tuple[int, int] | None = None,
+        sway: bool = False,
+    ) -> None:
+        rng = np.random.default_rng(seed)
+        self.w, self.h = width_px, height_px
+        self.sweep, self.move, self.sway = sweep, move, sway
+        self.bg = self._background(rng)
+        self.fruit = []
+        while len(self.fruit) < n_fruit:
+            r = float(rng.uniform(14, 30))
+            x, y = (
+                float(rng.uniform(r + 5, self.w - r - 5)),
+                float(rng.uniform(r + 5, self.h - r - 5)),
+            )
+            if all(np.hypot(x - f[0], y - f[1]) > r + f[2] + 6 for f in self.fruit):
+                self.fruit.append((x, y, r, float(rng.uniform(0.6, 0.9))))
+        self.leaves = [
+            (float(rng.uniform(0, self.w)), float(rng.uniform(0, self.h)), float(rng.uniform(0, 6)))
+            for _ in range(6)
+        ]
+        self.intr = CameraIntrinsics(
+            width_px=self.w,
+            height_px=self.h,
+            fx_px=615.0,
+            fy_px=615.0,
+            cx_px=self.w / 2,
+            cy_px=self.h / 2,
+        )
+
+    def _background(self, rng: np.random.Generator) -> np.ndarray:
+        img = np.zeros((self.h, self.w, 3), np.uint8)
+        img[:] = (70, 110, 60)
+        for _ in range(160):
+            c = (int(rng.integers(20, 70)), int(rng.integers(80, 150)), int(rng.integers(20, 60)))
+            ax = (int(rng.integers(8, 30)), int(rng.integers(4, 12)))
+            center = (int(rng.integers(0, self.w)), int(rng.integers(0, self.h)))
+            cv2.ellipse(img, center, ax, float(rng.uniform(0, 180)), 0, 360, c, -1)
+        for _ in range(4):
+            p0 = (int(rng.integers(0, self.w)), int(rng.integers(0, self.h)))
+            p1 = (int(rng.integers(0, self.w)), int(rng.integers(0, self.h)))
+            cv2.line(img, p0, p1, (90, 60, 40), int(rng.integers(3, 8)))
+        return img
+
+    def centre(self, i: int, k: int) -> tuple[float, float]:
+        x, y, _, _ = self.fruit[i]
+        if self.move and i == 0:
+            a, b = self.move
+            t = min(max((k - a) / max(b - a, 1), 0.0), 1.0)
+            x += 60 * t
+            y += 20 * t
+        return x, y
+
+    def occluder_box(self, k: int) -> tuple[int, int, int, int] | None:
+        if not self.sweep or not (self.sweep[0] <= k < self.sweep[1]):
+            return None
+        t = (k - self.sweep[0]) / (self.sweep[1] - self.sweep[0])
+        x = int(-160 + t * (self.w + 160))
+        return x, int(self.h * 0.2), x + 160, int(self.h * 0.8)
+
+    def frame(self, k: int) -> SceneFrame:
+        rgb = self.bg.copy()
+        depth = np.full((self.h, self.w), 1500, np.uint16)
+        ids = np.full((self.h, self.w), -1, np.int32)
+        for i, (_, _, r, z) in enumerate(self.fruit):
+            x, y = self.centre(i, k)
+            mask = np.zeros((self.h, self.w), np.uint8)
+            cv2.circle(mask, (round(x), round(y)), round(r), 1, -1)
+            m = mask.astype(bool)
+            yy, xx = np.nonzero(m)
+            shade = 1.0 - 0.45 * np.hypot(xx - x + r / 3, yy - y + r / 3) / (1.4 * r)
+            rgb[yy, xx] = (np.array([245, 135, 20])[None] * shade[:, None]).clip(0, 255)
+            depth[m] = int(z * 1000)
+            ids[m] = i
+        for lx, ly, phase in self.leaves if self.sway else ():
+            dx = 25 * np.sin(0.15 * k + phase)
+            cv2.ellipse(rgb, (int(lx + dx), int(ly)), (34, 14), 30, 0, 360, (40, 120, 40), -1)
+            leaf = np.zeros((self.h, self.w), np.uint8)
+            cv2.ellipse(leaf, (int(lx + dx), int(ly)), (34, 14), 30, 0, 360, 1, -1)
+            depth[leaf.astype(bool)] = 500
+            ids[leaf.astype(bool)] = -1
+        occ = self.occluder_box(k)
+        if occ is not None:
+            x1, y1, x2, y2 = occ
+            a, b = max(x1, 0), min(x2, self.w)
+            if a < b:
+                rgb[y1:y2, a:b] = (205, 170, 150)
+                depth[y1:y2, a:b] = 400
+                ids[y1:y2, a:b] = -1
+        views = []
+        for i, (_, _, r, _) in enumerate(self.fruit):
+            ys, xs = np.nonzero(ids == i)
+            full = np.pi * r * r
+            if len(xs) == 0:
+                views.append(FruitView(i, None, 0.0))
+                continue
+            box = (float(xs.min()), float(ys.min()), float(xs.max() + 1), float(ys.max() + 1))
+            views.append(FruitView(i, box, float(min(1.0, len(xs) / full))))
+        meta = RgbdFrameMeta(
+            header=Header(stamp_ns=k * FRAME_PERIOD_NS, seq=k, frame_id="camera", source="sim"),
+            intrinsics=self.intr,
+            T_world_camera=Pose(position_m=(0.0, 0.0, 1.2)),
+        )
+        return SceneFrame(RgbdFrame(meta, rgb, depth), tuple(views), occ is not None)
