@@ -6,7 +6,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from services.cli import bench, files, live, replay, run, train
+from services.cli import bench, evaluate, files, live, replay, run, train
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -19,6 +19,7 @@ def build_parser() -> argparse.ArgumentParser:
     replay.add_parsers(sub)
     bench.add_parser(sub)
     train.add_parsers(sub)
+    evaluate.add_parsers(sub)
     return ap
 
 

@@ -42,8 +42,8 @@ class Settings(ServiceSettings):
     hsv_hue_range: tuple[int, int] = Field(
         default=(5, 25), description="HSV baseline: hue band of orange (OpenCV 0-179)."
     )
-    hsv_sat_min: int = Field(default=110, ge=0, le=255, description="HSV baseline: least S.")
-    hsv_val_min: int = Field(default=80, ge=0, le=255, description="HSV baseline: least V.")
+    hsv_sat_min: int = Field(default=140, ge=0, le=255, description="HSV baseline: least S.")
+    hsv_val_min: int = Field(default=100, ge=0, le=255, description="HSV baseline: least V.")
     hsv_min_area_px: int = Field(
         default=40, ge=1, description="HSV baseline: smallest blob kept, pixels."
     )

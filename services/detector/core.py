@@ -32,6 +32,7 @@ class DetectorCore:
         self.s = settings
         self.stamper = Stamper("detector")
         self.counters: Counter[str] = Counter()
+        self.threshold = 0.0
         self.detect, self.name = self._build(settings)
 
     def _build(self, s: Settings):
@@ -41,7 +42,7 @@ class DetectorCore:
             hsv = HsvDetector(
                 s.hsv_hue_range, s.hsv_sat_min, s.hsv_val_min, s.hsv_min_area_px, s.max_detections
             )
-            threshold = s.score_threshold or 0.0
+            self.threshold = threshold = s.score_threshold or 0.0
             return (lambda rgb: _above(hsv.detect(rgb), threshold)), "hsv"
         import torch
 
@@ -56,6 +57,7 @@ class DetectorCore:
         threshold = s.score_threshold
         if threshold is None:
             threshold = float(w.meta.get("score_threshold", 0.3))
+        self.threshold = threshold
         det = OrangeDetector(w.net, score_min=threshold, top_k=s.max_detections)
         return det.detect, f"net:{w.version}"
 

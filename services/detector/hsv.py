@@ -16,8 +16,8 @@ class HsvDetector:
     def __init__(
         self,
         hue_range: tuple[int, int] = (5, 25),
-        sat_min: int = 110,
-        val_min: int = 80,
+        sat_min: int = 140,
+        val_min: int = 100,
         min_area_px: int = 40,
         max_detections: int = 100,
     ) -> None:

@@ -40,6 +40,20 @@ class Settings(ServiceSettings):
     depth_smoothing: float = Field(
         default=0.3, gt=0.0, le=1.0, description="Weight of a new depth in a track's average."
     )
+    min_containment: float = Field(
+        default=0.5,
+        gt=0.0,
+        le=1.0,
+        description="Containment stage: least intersection over the smaller box to re-attach a "
+        "detection to a confirmed track (a fruit growing back out of a partial occlusion).",
+    )
+    coast_velocity_decay: float = Field(
+        default=0.8,
+        ge=0.0,
+        le=1.0,
+        description="Factor on a track's velocity per frame while it is not seen (fruit hang "
+        "still; 1 = Deep SORT's pure constant velocity).",
+    )
     frame_buffer: int = Field(
         default=8, ge=1, le=64, description="Camera frames kept to join with their detections."
     )

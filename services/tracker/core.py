@@ -16,6 +16,7 @@ from __future__ import annotations
 from collections import Counter, OrderedDict
 from typing import Any
 
+import cv2
 import numpy as np
 
 from schemas.camera import RgbdFrame
@@ -30,18 +31,28 @@ TOPIC_OUT = "perception/tracks"
 MIN_DEPTH_PIXELS = 5
 
 
-def box_depth_m(depth: np.ndarray, unit_m: float, box: np.ndarray) -> float | None:
-    """Median valid depth of the central half of the box (the fruit, not its rim), m."""
+def box_depth_m(
+    depth: np.ndarray, rgb: np.ndarray | None, unit_m: float, box: np.ndarray
+) -> float | None:
+    """Median valid depth of the central half of the box, m, taken on fruit-coloured pixels
+    when there are enough of them: a hand or a leaf half covering the fruit is in the box too,
+    nearer, and would otherwise pull the depth towards itself."""
     h, w = depth.shape
     x1, y1, x2, y2 = box
     cx, cy, hw, hh = (x1 + x2) / 2, (y1 + y2) / 2, (x2 - x1) / 4, (y2 - y1) / 4
     a, b = int(max(0, np.floor(cx - hw))), int(min(w, np.ceil(cx + hw)))
     c, d = int(max(0, np.floor(cy - hh))), int(min(h, np.ceil(cy + hh)))
     patch = depth[c:d, a:b]
-    valid = patch[patch > 0]
-    if valid.size < MIN_DEPTH_PIXELS:
+    valid = patch > 0
+    if rgb is not None and patch.size:
+        hsv = cv2.cvtColor(np.ascontiguousarray(rgb[c:d, a:b]), cv2.COLOR_RGB2HSV)
+        fruit = valid & ((hsv[..., 0] <= 35) | (hsv[..., 0] >= 170)) & (hsv[..., 1] >= 80)
+        fruit &= hsv[..., 2] >= 40
+        if int(fruit.sum()) >= MIN_DEPTH_PIXELS:
+            valid = fruit
+    if int(valid.sum()) < MIN_DEPTH_PIXELS:
         return None
-    return float(np.median(valid)) * unit_m
+    return float(np.median(patch[valid])) * unit_m
 
 
 class TrackerCore:
@@ -57,6 +68,8 @@ class TrackerCore:
                 appearance_weight=settings.appearance_weight,
                 max_depth_jump_m=settings.max_depth_jump_m,
                 depth_smoothing=settings.depth_smoothing,
+                min_containment=settings.min_containment,
+                coast_velocity_decay=settings.coast_velocity_decay,
             )
         )
         self.stamper = Stamper("tracker")
@@ -130,7 +143,11 @@ class TrackerCore:
                 rejected += 1
                 continue
             feat = describe(frame.rgb, box) if frame is not None else None
-            depth = box_depth_m(frame.depth, frame.meta.depth_unit_m, box) if depth_ok else None
+            depth = (
+                box_depth_m(frame.depth, frame.rgb, frame.meta.depth_unit_m, box)
+                if depth_ok and frame is not None
+                else None
+            )
             ms.append(Measurement(box, d.score, feat, depth))
         self.tracker.predict()
         self.tracker.update(ms)

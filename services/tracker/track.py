@@ -64,7 +64,12 @@ class Track:
     def xyxy(self) -> np.ndarray:
         return xyah_to_xyxy(self.mean[:4])
 
-    def predict(self, kf: KalmanFilter) -> None:
+    def predict(self, kf: KalmanFilter, coast_velocity_decay: float = 1.0) -> None:
+        """One frame ahead. While the track coasts (missed last frame), its velocity decays:
+        fruit hang still, and a velocity learnt from a box shrinking behind an occluder would
+        otherwise carry the prediction away during a long occlusion."""
+        if self.time_since_update > 0:
+            self.mean[4:] *= coast_velocity_decay
         self.mean, self.cov = kf.predict(self.mean, self.cov)
         self.age += 1
         self.time_since_update += 1

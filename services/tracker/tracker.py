@@ -7,7 +7,12 @@
    bound, by ``max_cosine_distance`` and, when depth is known, by ``max_depth_jump_m``.
 3. Tentative tracks, and confirmed tracks missed for exactly one frame, are matched to what is
    left by IoU (``max_iou_distance`` = 1 - IoU).
-4. Unmatched tracks are marked missed; unmatched detections start tentative tracks with IDs
+4. (Our addition for fruit.) Confirmed tracks still unmatched are matched to what is left by
+   containment: intersection over the smaller box (>= ``min_containment``), under the same
+   depth gate (not the appearance gate: the occluder is inside the box). A fruit that a hand half covers shrinks to its visible part and
+   grows back when the hand leaves; neither the Mahalanobis gate nor IoU accepts that jump,
+   and Deep SORT would start a new ID for the same fruit.
+5. Unmatched tracks are marked missed; unmatched detections start tentative tracks with IDs
    from this tracker's own counter (1, 2, ...).
 """
 
@@ -40,6 +45,8 @@ class TrackerParams:
     appearance_weight: float = 0.5
     max_depth_jump_m: float = 0.25
     depth_smoothing: float = 0.3
+    min_containment: float = 0.5
+    coast_velocity_decay: float = 0.8
 
 
 class Tracker:
@@ -53,7 +60,7 @@ class Tracker:
 
     def predict(self) -> None:
         for t in self.tracks:
-            t.predict(self.kf)
+            t.predict(self.kf, self.p.coast_velocity_decay)
 
     def update(self, dets: Sequence[Measurement]) -> dict[int, int]:
         """Update with this frame's measurements; returns detection index → track ID."""
@@ -108,6 +115,28 @@ class Tracker:
             cost[r] = INFTY_COST if t.time_since_update > 1 else 1.0 - iou(t.xyxy(), boxes)
         return cost
 
+    def _containment_cost(
+        self, tis: Sequence[int], dis: Sequence[int], dets: Sequence[Measurement]
+    ):
+        boxes = np.stack([dets[d].xyxy_px for d in dis])
+        area = np.prod(boxes[:, 2:] - boxes[:, :2], axis=1)
+        depths = np.array([np.nan if dets[d].depth_m is None else dets[d].depth_m for d in dis])
+        cost = np.empty((len(tis), len(dis)))
+        for r, ti in enumerate(tis):
+            t = self.tracks[ti]
+            tb = t.xyxy()
+            lt = np.maximum(tb[:2], boxes[:, :2])
+            rb = np.minimum(tb[2:], boxes[:, 2:])
+            inter = np.prod(np.clip(rb - lt, 0, None), axis=1)
+            tarea = max(float(np.prod(tb[2:] - tb[:2])), 1e-6)
+            row = 1.0 - inter / np.maximum(np.minimum(area, tarea), 1e-6)
+            bad = np.zeros(len(dis), bool)
+            if t.depth_m is not None:
+                jump = np.abs(np.nan_to_num(depths, nan=t.depth_m) - t.depth_m)
+                bad |= jump > self.p.max_depth_jump_m
+            cost[r] = np.where(bad, INFTY_COST, row)
+        return cost
+
     def _match(self, dets: Sequence[Measurement]):
         confirmed = [i for i, t in enumerate(self.tracks) if t.confirmed]
         unconfirmed = [i for i, t in enumerate(self.tracks) if not t.confirmed]
@@ -128,4 +157,12 @@ class Tracker:
             iou_candidates,
             ud,
         )
-        return m_a + m_b, sorted(set(um_a + um_b)), ud
+        left = sorted(set(um_a + um_b))
+        m_c, _, ud = min_cost_matching(
+            lambda ti, di: self._containment_cost(ti, di, dets),
+            1.0 - self.p.min_containment,
+            [i for i in left if self.tracks[i].confirmed],
+            ud,
+        )
+        matched_c = {ti for ti, _ in m_c}
+        return m_a + m_b + m_c, [i for i in left if i not in matched_c], ud
