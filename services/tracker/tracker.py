@@ -8,10 +8,10 @@
 3. Tentative tracks, and confirmed tracks missed for exactly one frame, are matched to what is
    left by IoU (``max_iou_distance`` = 1 - IoU).
 4. (Our addition for fruit.) Confirmed tracks still unmatched are matched to what is left by
-   containment: intersection over the smaller box (>= ``min_containment``), under the same
-   depth gate (not the appearance gate: the occluder is inside the box). A fruit that a hand half covers shrinks to its visible part and
-   grows back when the hand leaves; neither the Mahalanobis gate nor IoU accepts that jump,
-   and Deep SORT would start a new ID for the same fruit.
+   containment: intersection over the smaller box (>= ``min_containment``), under the depth
+   gate (not the appearance gate: the occluder is inside the box). A fruit that a hand half
+   covers shrinks to its visible part and grows back when the hand leaves; neither the
+   Mahalanobis gate nor IoU accepts that jump, and Deep SORT would start a new ID for it.
 5. Unmatched tracks are marked missed; unmatched detections start tentative tracks with IDs
    from this tracker's own counter (1, 2, ...).
 """
