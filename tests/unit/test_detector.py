@@ -50,7 +50,9 @@ def test_targets_peak_at_box_centres_and_a_perfect_box_has_zero_giou_loss() -> N
     assert float(loss) < 1e-4
     logits = torch.logit(torch.from_numpy(heat[None]).clamp(1e-4, 1 - 1e-4))
     perfect = float(focal_loss(logits, torch.from_numpy(heat[None])))
-    assert perfect < 0.05 < float(focal_loss(torch.zeros_like(logits), torch.from_numpy(heat[None])))
+    assert (
+        perfect < 0.05 < float(focal_loss(torch.zeros_like(logits), torch.from_numpy(heat[None])))
+    )
 
 
 def test_weights_that_are_missing_or_do_not_match_are_refused_with_path_and_reason(
