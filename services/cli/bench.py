@@ -1,9 +1,11 @@
-"""`harvest bench ...`: benchmarks (bus for now; later sim, controller, harvest)."""
+"""`harvest bench ...`: benchmarks (bus, detector, tracker; later sim, controller, harvest)."""
 
 from __future__ import annotations
 
 import argparse
 import json
+
+from services.cli import bench_perception
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -25,6 +27,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--rounds", type=int, default=3, help="repetitions, ours and raw interleaved")
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(func=cmd_bench_bus)
+    bench_perception.add_parsers(bsub)
 
 
 def cmd_bench_bus(args: argparse.Namespace) -> int:

@@ -108,14 +108,16 @@ class Scene2D:
         ids = np.full((self.h, self.w), -1, np.int32)
         for i, (_, _, r, z) in enumerate(self.fruit):
             x, y = self.centre(i, k)
-            mask = np.zeros((self.h, self.w), np.uint8)
-            cv2.circle(mask, (round(x), round(y)), round(r), 1, -1)
-            m = mask.astype(bool)
-            yy, xx = np.nonzero(m)
+            x0, y0 = max(0, int(x - r) - 2), max(0, int(y - r) - 2)
+            x1, y1 = min(self.w, int(x + r) + 3), min(self.h, int(y + r) + 3)
+            local = np.zeros((y1 - y0, x1 - x0), np.uint8)
+            cv2.circle(local, (round(x) - x0, round(y) - y0), round(r), 1, -1)
+            yy, xx = np.nonzero(local)
+            yy, xx = yy + y0, xx + x0
             shade = 1.0 - 0.45 * np.hypot(xx - x + r / 3, yy - y + r / 3) / (1.4 * r)
             rgb[yy, xx] = (np.array([245, 135, 20])[None] * shade[:, None]).clip(0, 255)
-            depth[m] = int(z * 1000)
-            ids[m] = i
+            depth[yy, xx] = int(z * 1000)
+            ids[yy, xx] = i
         for lx, ly, phase in self.leaves if self.sway else ():
             dx = 25 * np.sin(0.15 * k + phase)
             cv2.ellipse(rgb, (int(lx + dx), int(ly)), (34, 14), 30, 0, 360, (40, 120, 40), -1)
@@ -133,7 +135,11 @@ class Scene2D:
                 ids[y1:y2, a:b] = -1
         views = []
         for i, (_, _, r, _) in enumerate(self.fruit):
-            ys, xs = np.nonzero(ids == i)
+            x, y = self.centre(i, k)
+            x0, y0 = max(0, int(x - r) - 2), max(0, int(y - r) - 2)
+            win = ids[y0 : int(y + r) + 3, x0 : int(x + r) + 3]
+            ys, xs = np.nonzero(win == i)
+            xs, ys = xs + x0, ys + y0
             full = np.pi * r * r
             if len(xs) == 0:
                 views.append(FruitView(i, None, 0.0))

@@ -8,7 +8,6 @@ velocities per frame. Measurement: (x, y, a, h). Noise scales with the box heigh
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 
 CHI2INV95 = {1: 3.8415, 2: 5.9915, 3: 7.8147, 4: 9.4877, 5: 11.070, 6: 12.592, 7: 14.067, 8: 15.507}
 """0.95 quantile of the chi-square distribution by degrees of freedom: the Mahalanobis gate."""
@@ -75,20 +74,26 @@ class KalmanFilter:
         self, mean: np.ndarray, cov: np.ndarray, z: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         pm, pc = self.project(mean, cov)
-        chol = scipy.linalg.cho_factor(pc, lower=True, check_finite=False)
-        gain = scipy.linalg.cho_solve(chol, (cov @ self._H.T).T, check_finite=False).T
+        # 4x4 systems: numpy's solve is exact enough and far cheaper per call than scipy's
+        # wrappers, which matters with 30 tracks at 15 Hz.
+        gain = np.linalg.solve(pc, (cov @ self._H.T).T).T
         new_mean = mean + gain @ (z - pm)
         new_cov = cov - gain @ pc @ gain.T
         return new_mean, new_cov
 
-    def gating_distance(
-        self, mean: np.ndarray, cov: np.ndarray, zs: np.ndarray, only_position: bool = False
-    ) -> np.ndarray:
+    def gating_distance(self, mean: np.ndarray, cov: np.ndarray, zs: np.ndarray) -> np.ndarray:
         """Squared Mahalanobis distance of each measurement (N, 4) to the predicted box."""
-        pm, pc = self.project(mean, cov)
-        if only_position:
-            pm, pc, zs = pm[:2], pc[:2, :2], zs[:, :2]
-        chol = np.linalg.cholesky(pc)
-        d = zs - pm
-        z = scipy.linalg.solve_triangular(chol, d.T, lower=True, check_finite=False)
-        return np.sum(z * z, axis=0)
+        return self.gating_distances(mean[None], cov[None], zs)[0]
+
+    def gating_distances(self, means: np.ndarray, covs: np.ndarray, zs: np.ndarray) -> np.ndarray:
+        """(T, N) squared Mahalanobis distances of N measurements to T tracks, in one batch."""
+        h = means[:, 3]
+        pm = means[:, :4]
+        pc = covs[:, :4, :4].copy()
+        r = np.square(
+            np.stack([self._wp * h, self._wp * h, np.full_like(h, 1e-1), self._wp * h], 1)
+        )
+        pc[:, np.arange(4), np.arange(4)] += r
+        d = zs[None, :, :] - pm[:, None, :]  # (T, N, 4)
+        x = np.linalg.solve(pc, d.transpose(0, 2, 1))  # (T, 4, N)
+        return np.einsum("tnk,tkn->tn", d, x)

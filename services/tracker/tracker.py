@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from services.tracker.appearance import appearance_distances
 from services.tracker.kalman_filter import CHI2INV95, KalmanFilter, xyxy_to_xyah
 from services.tracker.linear_assignment import (
     INFTY_COST,
@@ -92,20 +93,27 @@ class Tracker:
         zs = xyxy_to_xyah(np.stack([dets[d].xyxy_px for d in dis]))
         feats = [dets[d].feature for d in dis]
         depths = np.array([np.nan if dets[d].depth_m is None else dets[d].depth_m for d in dis])
-        cost = np.empty((len(tis), len(dis)))
         w = self.p.appearance_weight
-        for r, ti in enumerate(tis):
-            t = self.tracks[ti]
-            maha = self.kf.gating_distance(t.mean, t.cov, zs)
-            app = t.gallery.distance(feats)
-            row = np.where(np.isnan(app), maha / gate, w * app + (1 - w) * maha / gate)
-            bad = maha > gate
-            bad |= np.nan_to_num(app, nan=0.0) > self.p.max_cosine_distance
-            if t.depth_m is not None:
-                jump = np.abs(np.nan_to_num(depths, nan=t.depth_m) - t.depth_m)
-                bad |= jump > self.p.max_depth_jump_m
-            cost[r] = np.where(bad, INFTY_COST, row)
-        return cost
+        mahas = self.kf.gating_distances(
+            np.stack([self.tracks[ti].mean for ti in tis]),
+            np.stack([self.tracks[ti].cov for ti in tis]),
+            zs,
+        )
+        app = appearance_distances([self.tracks[ti].gallery for ti in tis], feats)
+        cost = np.where(np.isnan(app), mahas / gate, w * app + (1 - w) * mahas / gate)
+        bad = mahas > gate
+        bad |= np.nan_to_num(app, nan=0.0) > self.p.max_cosine_distance
+        bad |= self._depth_jumps(tis, depths)
+        return np.where(bad, INFTY_COST, cost)
+
+    def _depth_jumps(self, tis: Sequence[int], depths: np.ndarray) -> np.ndarray:
+        """(T, N) True where both depths are known and differ by more than the gate."""
+        td = np.array(
+            [np.nan if self.tracks[t].depth_m is None else self.tracks[t].depth_m for t in tis]
+        )
+        with np.errstate(invalid="ignore"):
+            jump = np.abs(td[:, None] - depths[None, :])
+        return np.nan_to_num(jump, nan=0.0) > self.p.max_depth_jump_m
 
     def _iou_cost(self, tis: Sequence[int], dis: Sequence[int], dets: Sequence[Measurement]):
         boxes = np.stack([dets[d].xyxy_px for d in dis])
@@ -129,13 +137,8 @@ class Tracker:
             rb = np.minimum(tb[2:], boxes[:, 2:])
             inter = np.prod(np.clip(rb - lt, 0, None), axis=1)
             tarea = max(float(np.prod(tb[2:] - tb[:2])), 1e-6)
-            row = 1.0 - inter / np.maximum(np.minimum(area, tarea), 1e-6)
-            bad = np.zeros(len(dis), bool)
-            if t.depth_m is not None:
-                jump = np.abs(np.nan_to_num(depths, nan=t.depth_m) - t.depth_m)
-                bad |= jump > self.p.max_depth_jump_m
-            cost[r] = np.where(bad, INFTY_COST, row)
-        return cost
+            cost[r] = 1.0 - inter / np.maximum(np.minimum(area, tarea), 1e-6)
+        return np.where(self._depth_jumps(tis, depths), INFTY_COST, cost)
 
     def _match(self, dets: Sequence[Measurement]):
         confirmed = [i for i, t in enumerate(self.tracks) if t.confirmed]
