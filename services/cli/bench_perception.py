@@ -47,9 +47,8 @@ def cmd_bench_detector(args: argparse.Namespace) -> int:
     from services.runtime.settings import load_settings
     from services.testkit.scene2d import Scene2D
 
-    core = DetectorCore(
-        load_settings(Settings, {"backend": args.backend, "torch_threads": args.threads})
-    )
+    settings = load_settings(Settings, {"backend": args.backend, "torch_threads": args.threads})
+    core = DetectorCore(settings)  # type: ignore[arg-type]
     scene = Scene2D(seed=0, n_fruit=12, sweep=(0, 60), sway=True)
     frames = [scene.frame(k).frame for k in range(20)]
     for f in frames[:5]:
@@ -73,7 +72,7 @@ def cmd_bench_tracker(args: argparse.Namespace) -> int:
     from services.tracker.core import TrackerCore
 
     scene = Scene2D(seed=0, n_fruit=args.tracks, sweep=None, sway=False, move=(0, args.frames))
-    core = TrackerCore(load_settings(Settings, {}))
+    core = TrackerCore(load_settings(Settings, {}))  # type: ignore[arg-type]
     ms, n_tracks = [], []
     for k in range(args.frames):
         sf = scene.frame(k)

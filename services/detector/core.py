@@ -54,9 +54,11 @@ class DetectorCore:
             w = load_weights(_resolve(s.weights_path))
         except WeightsError as exc:
             raise ConfigError(str(exc)) from None
-        threshold = s.score_threshold
-        if threshold is None:
-            threshold = float(w.meta.get("score_threshold", 0.3))
+        threshold = (
+            float(w.meta.get("score_threshold", 0.3))
+            if s.score_threshold is None
+            else s.score_threshold
+        )
         self.threshold = threshold
         det = OrangeDetector(w.net, score_min=threshold, top_k=s.max_detections)
         return det.detect, f"net:{w.version}"

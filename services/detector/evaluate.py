@@ -72,7 +72,9 @@ def coco_ap(gts: Sequence[np.ndarray], dets: Sequence[np.ndarray]) -> tuple[floa
     from pycocotools.coco import COCO
     from pycocotools.cocoeval import COCOeval
 
-    images, anns, results = [], [], []
+    images: list[dict] = []
+    anns: list[dict] = []
+    results: list[dict] = []
     for i, (g, d) in enumerate(zip(gts, dets, strict=True)):
         images.append({"id": i + 1})
         for b in g:

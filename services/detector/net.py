@@ -35,8 +35,8 @@ class NetConfig:
     @staticmethod
     def from_dict(d: dict) -> NetConfig:
         return NetConfig(
-            widths=tuple(d["widths"]),  # type: ignore[arg-type]
-            blocks=tuple(d["blocks"]),  # type: ignore[arg-type]
+            widths=tuple(d["widths"]),
+            blocks=tuple(d["blocks"]),
             neck=int(d["neck"]),
             input_w_px=int(d["input_w_px"]),
             input_h_px=int(d["input_h_px"]),
@@ -84,8 +84,11 @@ class OrangeNet(nn.Module):
         self.s8 = nn.Sequential(_cbr(w4, w8, 3, 2), *[_Residual(w8) for _ in range(b8)])
         self.s16 = nn.Sequential(_cbr(w8, w16, 3, 2), *[_Residual(w16) for _ in range(b16)])
         # Context: a dilated conv widens the receptive field at stride 16 for large fruit.
-        self.ctx = _cbr(w16, w16, 3, 1)
-        self.ctx[0].dilation, self.ctx[0].padding = (2, 2), (2, 2)
+        self.ctx = nn.Sequential(
+            nn.Conv2d(w16, w16, 3, 1, padding=2, dilation=2, bias=False),
+            nn.BatchNorm2d(w16),
+            nn.ReLU(inplace=True),
+        )
         n = cfg.neck
         self.lat16 = _cbr(w16, n, 1)
         self.lat8 = _cbr(w8, n, 1)

@@ -151,7 +151,9 @@ def train(
     out = Path(cfg.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     (out / "config.json").write_text(json.dumps(asdict(cfg), indent=2))
-    start_epoch, best, history = 0, {"score": -1.0, "epoch": -1, "metrics": {}}, []
+    start_epoch = 0
+    best: dict[str, Any] = {"score": -1.0, "epoch": -1, "metrics": {}}
+    history: list[dict[str, Any]] = []
     if resume and (out / "last.pt").exists():
         ck = torch.load(out / "last.pt", map_location=device, weights_only=False)
         net.load_state_dict(ck["model"])

@@ -50,7 +50,7 @@ class Scene2D:
         self.w, self.h = width_px, height_px
         self.sweep, self.move, self.sway = sweep, move, sway
         self.bg = self._background(rng)
-        self.fruit = []
+        self.fruit: list[tuple[float, float, float, float]] = []  # x, y, radius px; depth m
         while len(self.fruit) < n_fruit:
             r = float(rng.uniform(14, 30))
             x, y = (

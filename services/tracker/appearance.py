@@ -90,7 +90,8 @@ def appearance_distances(
         return out
     rows = [i for i, n in enumerate(sizes) if n]
     stacked = np.concatenate([np.stack(galleries[i].features) for i in rows])
-    sims = stacked @ np.stack([features[j] for j in known]).T  # (sum of sizes, known)
+    fmat = np.stack([f for f in features if f is not None])
+    sims = stacked @ fmat.T  # (sum of sizes, known)
     starts = np.cumsum([0] + [sizes[i] for i in rows[:-1]])
     best = np.maximum.reduceat(sims, starts, axis=0)  # (rows, known)
     out[np.ix_(rows, known)] = np.maximum(0.0, 1.0 - best)

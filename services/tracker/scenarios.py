@@ -53,7 +53,7 @@ def scripted(name: str, seed: int, n_fruit: int = 8, n_frames: int = SCRIPTED_FR
                 if v.box_xyxy_px is not None
             )
             partial = any(0.0 < v.visible_fraction < 0.9 for v in f.fruits)
-            yield TruthFrame(f.frame, fruits, f.occluder_active or partial)  # type: ignore[arg-type]
+            yield TruthFrame(f.frame, fruits, f.occluder_active or partial)
 
     return frames
 
