@@ -23,14 +23,16 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         "--data",
         action="append",
         metavar="FILE.json[:WEIGHT]",
-        help="a training set in the shared JSON format and its share of the draws (repeatable; "
-        "default: oranges_real/train.json)",
+        help="a training set in the shared JSON format, or 'scripted' (scripted 2D scenes drawn "
+        "fresh), and its share of the draws (repeatable; default: oranges_real/train.json and "
+        "scripted:0.35)",
     )
     d.add_argument(
         "--val",
         action="append",
         metavar="FILE.json",
-        help="a validation set for model selection (repeatable; default: oranges_real/val.json)",
+        help="a validation set for model selection, or 'scripted' (60 seeded scripted frames) "
+        "(repeatable; default: oranges_real/val.json and scripted)",
     )
     d.add_argument("--out-dir", type=Path, default=Path("runs/detector"), help="checkpoints")
     d.add_argument("--weights", type=Path, help="where to write the selected weights")
@@ -60,8 +62,8 @@ def cmd_train_detector(args: argparse.Namespace) -> int:
 
     real = real_data_dir()
     cfg = TrainConfig(
-        train=[_spec(a) for a in (args.data or [str(real / "train.json")])],
-        val=[_spec(a) for a in (args.val or [str(real / "val.json")])],
+        train=[_spec(a) for a in (args.data or [str(real / "train.json"), "scripted:0.35"])],
+        val=[_spec(a) for a in (args.val or [str(real / "val.json"), "scripted"])],
         out_dir=str(args.out_dir),
         weights_out=str(args.weights or DEFAULT_WEIGHTS),
         epochs=args.epochs,

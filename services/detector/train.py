@@ -27,14 +27,35 @@ from services.detector.infer import OrangeDetector, save_weights
 from services.detector.net import NetConfig, OrangeNet
 from services.detector.targets import focal_loss, giou_loss, make_targets
 
+SCRIPTED = "scripted"
+"""Data-set name of the scripted 2D scenes (services/testkit/scene2d.py): drawn fresh for
+every training sample, and written once (seeded) as a validation set in the run folder."""
+SCRIPTED_VAL_FRAMES = 60
+SCRIPTED_VAL_SEED = 10_000
+
 
 @dataclass
 class DataSpec:
-    """One data set file, its images root, and its share of the training draws."""
+    """One data set file (or ``scripted``), its images root, and its share of the draws."""
 
     json_path: str
     images_root: str | None = None
     weight: float = 1.0
+
+
+def resolve_val(specs: list[DataSpec], out_dir: Path) -> list[DataSpec]:
+    """Validation specs with ``scripted`` replaced by its (written once) data set file."""
+    from services.testkit.scene2d import write_dataset
+
+    out = []
+    for s in specs:
+        if s.json_path == SCRIPTED:
+            path = out_dir / "scripted-val" / "scripted_val.json"
+            if not path.exists():
+                write_dataset(path.parent, SCRIPTED_VAL_FRAMES, SCRIPTED_VAL_SEED, path.name)
+            s = DataSpec(str(path), None, s.weight)
+        out.append(s)
+    return out
 
 
 @dataclass
@@ -68,6 +89,10 @@ class _Pool:
         self.sets: list[list[Sample]] = []
         w = []
         for s in specs:
+            if s.json_path == SCRIPTED:
+                self.sets.append([])  # drawn fresh each time, see draw()
+                w.append(s.weight)
+                continue
             samples = load_dataset(
                 Path(s.json_path), Path(s.images_root) if s.images_root else None
             )
@@ -78,6 +103,14 @@ class _Pool:
 
     def draw(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         k = int(rng.choice(len(self.sets), p=self.p))
+        if not self.sets[k]:
+            from services.testkit.scene2d import random_scene
+
+            f = random_scene(rng).frame(int(rng.integers(0, 80)))
+            boxes = [
+                v.box_xyxy_px for v in f.fruits if v.box_xyxy_px and v.visible_fraction >= 0.5
+            ]
+            return f.frame.rgb, np.asarray(boxes, np.float32).reshape(-1, 4)
         s = self.sets[k][int(rng.integers(len(self.sets[k])))]
         img = self._cache.get(s.path)
         if img is None:
@@ -150,6 +183,7 @@ def train(
     opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     out = Path(cfg.out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    cfg.val = resolve_val(cfg.val, out)
     (out / "config.json").write_text(json.dumps(asdict(cfg), indent=2))
     start_epoch = 0
     best: dict[str, Any] = {"score": -1.0, "epoch": -1, "metrics": {}}
@@ -239,6 +273,7 @@ def finalize(cfg: TrainConfig, summary: dict[str, Any], command: str) -> dict[st
     from services.detector.infer import load_weights
 
     device = pick_device()
+    cfg.val = resolve_val(cfg.val, Path(cfg.out_dir))
     best = load_weights(Path(cfg.out_dir) / "best.pt")
     net = best.net.to(device)
     threshold = choose_threshold(net, cfg.val, device)

@@ -8,7 +8,10 @@ visible box, the visible fraction, and whether an occlusion event is active.
 
 from __future__ import annotations
 
+import argparse
+import json
 from dataclasses import dataclass
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -152,3 +155,55 @@ class Scene2D:
             T_world_camera=Pose(position_m=(0.0, 0.0, 1.2)),
         )
         return SceneFrame(RgbdFrame(meta, rgb, depth), tuple(views), occ is not None)
+
+
+def random_scene(rng: np.random.Generator, width_px: int = 640, height_px: int = 480) -> Scene2D:
+    """A scene with randomised fruit count, sweep and leaves (detector training and tests)."""
+    start = int(rng.integers(0, 40))
+    return Scene2D(
+        seed=int(rng.integers(2**31)),
+        n_fruit=int(rng.integers(3, 20)),
+        width_px=width_px,
+        height_px=height_px,
+        sweep=(start, start + 40) if rng.random() < 0.5 else None,
+        sway=bool(rng.random() < 0.5),
+    )
+
+
+def write_dataset(out_dir: Path, frames: int, seed: int, name: str = "dataset.json") -> Path:
+    """Write ``frames`` random scenes (PNG) and their visible boxes as a data set in the shared
+    JSON format (fruit less than half visible are left out, as a labeller would)."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    entries = []
+    for i in range(frames):
+        f = random_scene(rng).frame(int(rng.integers(0, 80)))
+        image = f"scripted_{seed}_{i:04d}.png"
+        cv2.imwrite(str(out_dir / image), cv2.cvtColor(f.frame.rgb, cv2.COLOR_RGB2BGR))
+        boxes = [
+            [round(c, 1) for c in v.box_xyxy_px]
+            for v in f.fruits
+            if v.box_xyxy_px is not None and v.visible_fraction >= 0.5
+        ]
+        h, w = f.frame.rgb.shape[:2]
+        entries.append({"image": image, "width": w, "height": h, "boxes": boxes})
+    path = out_dir / name
+    path.write_text(json.dumps(entries))
+    return path
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(
+        prog="python -m services.testkit.scene2d",
+        description="Write scripted 2D scenes as a detection data set (shared JSON format).",
+    )
+    ap.add_argument("--out", type=Path, required=True, help="output folder")
+    ap.add_argument("--frames", type=int, default=200)
+    ap.add_argument("--seed", type=int, default=20_000)
+    args = ap.parse_args(argv)
+    print(write_dataset(args.out, args.frames, args.seed))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
