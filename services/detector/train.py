@@ -107,9 +107,7 @@ class _Pool:
             from services.testkit.scene2d import random_scene
 
             f = random_scene(rng).frame(int(rng.integers(0, 80)))
-            boxes = [
-                v.box_xyxy_px for v in f.fruits if v.box_xyxy_px and v.visible_fraction >= 0.5
-            ]
+            boxes = [v.box_xyxy_px for v in f.fruits if v.box_xyxy_px and v.visible_fraction >= 0.5]
             return f.frame.rgb, np.asarray(boxes, np.float32).reshape(-1, 4)
         s = self.sets[k][int(rng.integers(len(self.sets[k])))]
         img = self._cache.get(s.path)

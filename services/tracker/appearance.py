@@ -12,7 +12,6 @@ distance is 1 - dot product.
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Sequence
 
 import cv2
@@ -57,25 +56,29 @@ def describe(hsv_image: np.ndarray, box_xyxy_px: np.ndarray) -> np.ndarray | Non
 
 
 class Gallery:
-    """The last ``budget`` descriptors of one track (Deep SORT's nn_budget)."""
+    """The last ``budget`` descriptors of one track (Deep SORT's nn_budget), kept as the rows
+    of one array (a ring buffer), so matching needs no stacking per frame."""
 
     def __init__(self, budget: int) -> None:
-        self.features: deque[np.ndarray] = deque(maxlen=budget)
+        self.matrix = np.zeros((budget, DESCRIPTOR_DIM))
+        self.size = 0
+        self._next = 0
+
+    @property
+    def features(self) -> np.ndarray:
+        """The stored descriptors, (size, DESCRIPTOR_DIM), in no particular order."""
+        return self.matrix[: self.size]
 
     def add(self, feature: np.ndarray | None) -> None:
-        if feature is not None:
-            self.features.append(feature)
+        if feature is None:
+            return
+        self.matrix[self._next] = feature
+        self._next = (self._next + 1) % len(self.matrix)
+        self.size = min(self.size + 1, len(self.matrix))
 
     def distance(self, features: Sequence[np.ndarray | None]) -> np.ndarray:
         """Smallest cosine distance to the gallery for each feature; NaN where unknown."""
-        out = np.full(len(features), np.nan)
-        if not self.features:
-            return out
-        g = np.stack(self.features)
-        for j, f in enumerate(features):
-            if f is not None:
-                out[j] = max(0.0, 1.0 - float(np.max(g @ f)))
-        return out
+        return appearance_distances([self], features)[0]
 
 
 def appearance_distances(
@@ -85,14 +88,13 @@ def appearance_distances(
     empty), from one matrix product over all galleries stacked."""
     out = np.full((len(galleries), len(features)), np.nan)
     known = [j for j, f in enumerate(features) if f is not None]
-    sizes = [len(g.features) for g in galleries]
-    if not known or not any(sizes):
+    rows = [i for i, g in enumerate(galleries) if g.size]
+    if not known or not rows:
         return out
-    rows = [i for i, n in enumerate(sizes) if n]
-    stacked = np.concatenate([np.stack(galleries[i].features) for i in rows])
+    stacked = np.concatenate([galleries[i].features for i in rows])
     fmat = np.stack([f for f in features if f is not None])
     sims = stacked @ fmat.T  # (sum of sizes, known)
-    starts = np.cumsum([0] + [sizes[i] for i in rows[:-1]])
+    starts = np.cumsum([0] + [galleries[i].size for i in rows[:-1]])
     best = np.maximum.reduceat(sims, starts, axis=0)  # (rows, known)
     out[np.ix_(rows, known)] = np.maximum(0.0, 1.0 - best)
     return out

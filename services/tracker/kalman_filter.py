@@ -22,9 +22,10 @@ def xyxy_to_xyah(box: np.ndarray) -> np.ndarray:
 
 
 def xyah_to_xyxy(xyah: np.ndarray) -> np.ndarray:
-    x, y, a, h = (np.asarray(xyah, dtype=np.float64)[..., i] for i in range(4))
-    w = a * h
-    return np.stack([x - w / 2, y - h / 2, x + w / 2, y + h / 2], axis=-1)
+    a = np.asarray(xyah, dtype=np.float64)
+    w = a[..., 2] * a[..., 3]
+    half = np.stack([w / 2, a[..., 3] / 2], axis=-1)
+    return np.concatenate([a[..., :2] - half, a[..., :2] + half], axis=-1)
 
 
 class KalmanFilter:
