@@ -77,7 +77,7 @@ class CameraPreview:
 
         self._cv2 = cv2
         self.fmt, self.scale, self.jpeg_quality = fmt, scale, jpeg_quality
-        self._image_cls = CompressedImage if fmt == "jpeg" else RawImage
+        self._image_cls: Any = CompressedImage if fmt == "jpeg" else RawImage
         self._calib_cls, self._tf_cls = CameraCalibration, FrameTransforms
         self.schemas: dict[str, bytes] = {
             cls.DESCRIPTOR.full_name: file_descriptor_set(cls)
