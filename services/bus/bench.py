@@ -233,7 +233,7 @@ def _measure(env: _Env, mode: str, kind: str, rate_hz: float, seconds: float) ->
     return lat[20:]  # warm-up
 
 
-def _recorder_cpu(env: _Env, seconds: float) -> dict[str, float]:
+def _recorder_cpu(env: _Env, seconds: float, settings_json: str = "{}") -> dict[str, float]:
     out = env.dir / "rec.mcap"
     rec = subprocess.Popen(
         [
@@ -242,6 +242,8 @@ def _recorder_cpu(env: _Env, seconds: float) -> dict[str, float]:
             "services.recorder",
             "--out",
             str(out),
+            "--settings-json",
+            settings_json,
             *bus_args(BusSettings(connect=(env.endpoint,), namespace=env.ns)),
         ],
         stderr=subprocess.DEVNULL,
@@ -267,6 +269,41 @@ def _recorder_cpu(env: _Env, seconds: float) -> dict[str, float]:
         "recorder_cpu_pct_15hz": 100.0 * (cpu1 - cpu0) / (t1 - t0),
         "recorder_mb_written": out.stat().st_size / 1e6,
     }
+
+
+RECORDER_VARIANTS = {
+    "": "{}",
+    "_no_preview": '{"preview": "none"}',
+    "_raw_preview": '{"preview": "raw"}',
+    "_full_jpeg_preview": '{"preview_scale": 1.0}',
+}
+"""Default settings (JPEG camera preview at half resolution), no preview, a lossless rgb8 preview
+at half resolution, a JPEG preview at full resolution."""
+
+
+def _recorder_rounds(seconds: float, rounds: int, progress: bool) -> dict[str, Any]:
+    """Recorder CPU and file size, with and without the camera preview, interleaved; medians."""
+    per: dict[str, list[dict[str, float]]] = {k: [] for k in RECORDER_VARIANTS}
+    for r in range(rounds):
+        for suffix, settings_json in RECORDER_VARIANTS.items():
+            if progress:
+                print(
+                    f"  round {r + 1}/{rounds}: recorder at 15 Hz RGB-D {settings_json}",
+                    file=sys.stderr,
+                    flush=True,
+                )
+            env = _Env()
+            try:
+                per[suffix].append(_recorder_cpu(env, max(seconds, 5.0), settings_json))
+            finally:
+                env.close()
+    out: dict[str, Any] = {}
+    for suffix, results in per.items():
+        for key in results[0]:
+            values = [x[key] for x in results]
+            out[f"{key}{suffix}"] = float(np.median(values))
+            out[f"{key}{suffix}_rounds"] = values
+    return out
 
 
 def _cpu_s(pid: int) -> float:
@@ -315,13 +352,7 @@ def run_bus_bench(seconds: float = 3.0, rounds: int = 3, progress: bool = True) 
     for kind in ("small", "frame"):
         pairs = zip(per[("ours", kind)], per[("raw", kind)], strict=True)
         res[f"{kind}_ratio_p50"] = float(np.median([o[0] / w[0] for o, w in pairs]))
-    if progress:
-        print("  recorder CPU at 15 Hz RGB-D", file=sys.stderr, flush=True)
-    env = _Env()
-    try:
-        res.update(_recorder_cpu(env, max(seconds, 5.0)))
-    finally:
-        env.close()
+    res.update(_recorder_rounds(seconds, rounds, progress))
     res["small_bytes"] = len(TOPICS[SMALL_KEY].codec.encode(small_msg(0)))
     res["frame_bytes"] = len(TOPICS[FRAME_KEY].codec.encode(frame_msg(0, *test_images())))
     return res
@@ -350,7 +381,11 @@ def table(r: dict[str, Any]) -> str:
     ]
     lines = [f"{'case':36} {'ours':>16} {'raw zenoh':>16} {'ratio':>6}"]
     lines += [f"{a:36} {b:>16} {c:>16} {d:>6}" for a, b, c, d in rows]
-    lines.append(f"recorder CPU at 15 Hz RGB-D: {r['recorder_cpu_pct_15hz']:.1f} % of one core")
+    lines.append(
+        f"recorder CPU at 15 Hz RGB-D: {r['recorder_cpu_pct_15hz']:.1f} % of one core with the "
+        f"camera preview, {r['recorder_cpu_pct_15hz_no_preview']:.1f} % without; file "
+        f"{r['recorder_mb_written']:.1f} MB vs {r['recorder_mb_written_no_preview']:.1f} MB"
+    )
     return "\n".join(lines)
 
 

@@ -110,8 +110,4 @@ class RobotView:
 
 def _model_limits() -> dict[str, float]:
     limits = velocity_limits_rad_s()
-    return {
-        name: limits[i]
-        for role in TOOL_FRAME
-        for i, name in enumerate(joint_names(role))
-    }
+    return {name: limits[i] for role in TOOL_FRAME for i, name in enumerate(joint_names(role))}

@@ -53,7 +53,7 @@ def open_stream(settings: Settings, recording_id: str, save_path: Path | None = 
         if not has_display():
             raise SinkError(
                 "cannot spawn a viewer: no display (DISPLAY/WAYLAND_DISPLAY unset); use "
-                "--serve (then open the printed URL) or --save FILE.rrd"
+                "--serve (then open the printed URL) or write an .rrd (view --out, run --save)"
             )
         rr.spawn(
             port=settings.grpc_port,
