@@ -33,7 +33,19 @@ def blueprint() -> Any:
         rrb.Horizontal(
             rrb.Vertical(
                 rrb.Spatial3DView(
-                    name="scene", origin="/", contents=[f"{paths.WORLD}/**", f"{paths.ROBOT}/**"]
+                    name="scene",
+                    origin="/",
+                    # the depth cloud hides the fruit it surrounds: one click adds it back
+                    contents=[
+                        f"{paths.WORLD}/**",
+                        f"{paths.ROBOT}/**",
+                        f"- {paths.DEPTH}",
+                        f"- {paths.TRUNK_MASK}",
+                    ],
+                    # behind and above the robot, looking at the tree in front of it
+                    eye_controls=rrb.EyeControls3D(
+                        position=(-1.5, -2.1, 2.5), look_target=(0.9, 0.0, 1.1), eye_up=(0, 0, 1)
+                    ),
                 ),
                 rrb.TextLogView(name="events", origin=paths.LOG),
                 row_shares=[3, 1],

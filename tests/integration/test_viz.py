@@ -43,9 +43,7 @@ def test_live_viz_draws_what_harvest_view_draws(bus_env: BusEnv, tmp_path: Path)
     wait_until(lambda: "viz" in observer.live_services(0.5), 30, "the viz service")
     # At the recorded pace: as fast as possible drops RGB-D frames in Zenoh before they reach
     # any subscriber (see the report), which is not what this test is about.
-    r = harvest(
-        "replay", str(fx.PATH), "--speed", "1", *bus_env.flags(), timeout=120
-    )
+    r = harvest("replay", str(fx.PATH), "--speed", "1", *bus_env.flags(), timeout=120)
     assert r.returncode == 0, r.stderr
     assert "published 409 messages" in r.stdout  # derived preview channels are never replayed
 
@@ -68,10 +66,9 @@ def test_harvest_run_save_adds_viz_and_keeps_the_run_lockstep(tmp_path: Path) ->
     try:
         stack = write_stack(d / "s.yaml", d / "rec", ticks=50)
         rrd = d / "run.rrd"
-        r = harvest(
-            "run", "--stack", str(stack), "--run-id", "vizrun", "--save", str(rrd),
-            "--listen", f"unixsock-stream/{d}/router.sock", "--quiet", timeout=180,
-        )  # fmt: skip
+        listen = f"unixsock-stream/{d}/router.sock"
+        args = ["--run-id", "vizrun", "--save", str(rrd), "--listen", listen, "--quiet"]
+        r = harvest("run", "--stack", str(stack), *args, timeout=180)
         assert r.returncode == 0, r.stdout + r.stderr
         assert "viz" in r.stdout  # the summary lists every service
         ticks = [m for m in iter_messages(d / "rec" / "vizrun.mcap") if m.topic == "demo/tick"]
@@ -101,3 +98,23 @@ def test_view_without_a_display_says_what_to_do(tmp_path: Path) -> None:
 def test_view_with_a_bad_setting_names_it(tmp_path: Path) -> None:
     r = harvest("view", str(fx.PATH), "--out", str(tmp_path / "x.rrd"), "--set", "d_s_m=-1")
     assert r.returncode == 1 and "d_s_m" in r.stderr
+
+
+def _vulkan_driver() -> bool:
+    dirs = (Path("/usr/share/vulkan/icd.d"), Path("/etc/vulkan/icd.d"))
+    return any(d.is_dir() and any(d.glob("*.json")) for d in dirs)
+
+
+@pytest.mark.skipif(
+    not _vulkan_driver(), reason="no Vulkan driver (CPU-only: apt-get install mesa-vulkan-drivers)"
+)
+def test_headless_screenshot_renders_the_blueprint(tmp_path: Path) -> None:
+    import cv2
+
+    png = tmp_path / "shot.png"
+    out = tmp_path / "x.rrd"
+    r = harvest("view", str(fx.PATH), "--out", str(out), "--screenshot", str(png), timeout=180)
+    assert r.returncode == 0, r.stdout + r.stderr
+    image = cv2.imread(str(png))
+    assert image is not None and image.shape[0] >= 900 and image.shape[1] >= 1600
+    assert image.std() > 20  # drawn views, not a blank window

@@ -43,7 +43,12 @@ def test_raw_preview_at_full_scale_is_the_camera_image() -> None:
     image, calib, tf = CameraPreview("raw", 1.0).derive(payload)
     assert (image.topic, calib.topic, tf.topic) == (IMAGE_TOPIC, CALIBRATION_TOPIC, TF_TOPIC)
     raw = RawImage.FromString(image.data)
-    assert (raw.width, raw.height, raw.encoding, raw.frame_id) == (160, 120, "rgb8", "camera_optical")
+    assert (raw.width, raw.height, raw.encoding, raw.frame_id) == (
+        160,
+        120,
+        "rgb8",
+        "camera_optical",
+    )
     assert raw.data == frame.rgb.tobytes()
     assert raw.timestamp.ToNanoseconds() == frame.meta.header.stamp_ns
 

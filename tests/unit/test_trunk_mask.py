@@ -48,7 +48,7 @@ def test_paper_bounds(hsv: tuple[int, int, int], inside: bool) -> None:
     rgb = np.full((1, 1, 3), rgb_of_hsv(*hsv), np.uint8)
     assert tuple(int(x) for x in cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)[0, 0]) == hsv  # exact pixel
     assert hsv_depth_mask(rgb, np.array([[1000]], np.uint16), 0.001, 2.0)[0, 0] == inside
-    assert PAPER_TRUNK_HSV == HsvBox(low=(10, 70, 80), high=(20, 130, 140))
+    assert HsvBox(low=(10, 70, 80), high=(20, 130, 140)) == PAPER_TRUNK_HSV
 
 
 def test_bad_inputs_name_the_problem() -> None:

@@ -67,7 +67,9 @@ def fixture_rrd(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, ViewRep
     return out, to_rrd(fx.PATH, out)
 
 
-def test_rrd_holds_every_drawing_with_the_expected_counts(fixture_rrd: tuple[Path, ViewReport]) -> None:
+def test_rrd_holds_every_drawing_with_the_expected_counts(
+    fixture_rrd: tuple[Path, ViewReport],
+) -> None:
     out, report = fixture_rrd
     rows, columns, _ = read_rrd(out)
     depth_frames = len(range(0, FRAMES, 3))  # 5 Hz of a 15 Hz camera
@@ -110,7 +112,9 @@ def test_rrd_holds_every_drawing_with_the_expected_counts(fixture_rrd: tuple[Pat
     assert report.derived == 3 * FRAMES and not report.failed and report.run_metadata
 
 
-def test_controller_state_changes_are_logged_not_every_tick(fixture_rrd: tuple[Path, ViewReport]) -> None:
+def test_controller_state_changes_are_logged_not_every_tick(
+    fixture_rrd: tuple[Path, ViewReport],
+) -> None:
     rows, _, _ = read_rrd(fixture_rrd[0])
     # first tick, approach → harvest, converged with fallback softened (one tick), fallback none
     assert rows[paths.LOG_CONTROL] == 4
@@ -137,7 +141,9 @@ def test_each_track_keeps_one_colour_and_ids_differ(fixture_rrd: tuple[Path, Vie
     for chunk in (c for c in temporal if c.entity_path == paths.TRACKS):
         batch = chunk.to_record_batch()
         for ids, colours in zip(
-            batch.column("track_id").to_pylist(), batch.column("Boxes2D:colors").to_pylist(), strict=True
+            batch.column("track_id").to_pylist(),
+            batch.column("Boxes2D:colors").to_pylist(),
+            strict=True,
         ):
             for i, c in zip(ids, colours, strict=True):
                 colour_of.setdefault(i, set()).add(c)
@@ -180,7 +186,9 @@ def test_live_flushing_gives_the_same_rows_as_offline(
     assert read_rrd(out)[0] == read_rrd(fixture_rrd[0])[0]
 
 
-def test_missing_urdf_draws_the_rest_and_warns_once(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+def test_missing_urdf_draws_the_rest_and_warns_once(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     caplog.set_level(logging.WARNING)
     report = to_rrd(fx.PATH, tmp_path / "nourdf.rrd", urdf_path=tmp_path / "missing.urdf")
     rows, columns, _ = read_rrd(tmp_path / "nourdf.rrd")
@@ -235,7 +243,7 @@ def test_an_mcap_with_none_of_our_channels_goes_to_rerun_importer(tmp_path: Path
         w.finish()
     report = to_rrd(src, tmp_path / "camera_only.rrd")
     assert report.rerun_importer and not report.drawn
-    rows, columns, _ = read_rrd(tmp_path / "camera_only.rrd")
+    _rows, columns, _ = read_rrd(tmp_path / "camera_only.rrd")
     assert "EncodedImage:blob" in columns["/preview/camera/image"]
 
 
@@ -251,7 +259,9 @@ def test_solve_time_hook_plots_on_its_entity(tmp_path: Path) -> None:
     rec.disconnect()
     _, _, temporal = read_rrd(tmp_path / "hook.rrd")
     (chunk,) = [c for c in temporal if c.entity_path == paths.SOLVE_TIME]
-    values = [v for row in chunk.to_record_batch().column("Scalars:scalars").to_pylist() for v in row]
+    values = [
+        v for row in chunk.to_record_batch().column("Scalars:scalars").to_pylist() for v in row
+    ]
     assert values == pytest.approx([0.8, 1.2, 0.9])
 
 
@@ -268,7 +278,9 @@ def test_d_s_setting_is_the_plotted_safety_distance(tmp_path: Path) -> None:
     assert values == {0.05}
 
 
-def test_joint_velocities_are_fractions_of_the_urdf_limits(fixture_rrd: tuple[Path, ViewReport]) -> None:
+def test_joint_velocities_are_fractions_of_the_urdf_limits(
+    fixture_rrd: tuple[Path, ViewReport],
+) -> None:
     _, _, temporal = read_rrd(fixture_rrd[0])
     rows = [
         row
