@@ -142,7 +142,9 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
-class _Env:
+class BenchEnv:
+    """A private router on a free TCP port and a publisher session (also used by the viz bench)."""
+
     def __init__(self) -> None:
         self.dir = Path(tempfile.mkdtemp(prefix="bench-bus-"))
         self.endpoint = f"tcp/127.0.0.1:{_free_port()}"
@@ -175,7 +177,7 @@ class _Env:
         self.router.wait()
 
 
-def _measure(env: _Env, mode: str, kind: str, rate_hz: float, seconds: float) -> list[int]:
+def _measure(env: BenchEnv, mode: str, kind: str, rate_hz: float, seconds: float) -> list[int]:
     out = env.dir / f"{mode}-{kind}.json"
     sub = subprocess.Popen(
         [
@@ -233,7 +235,7 @@ def _measure(env: _Env, mode: str, kind: str, rate_hz: float, seconds: float) ->
     return lat[20:]  # warm-up
 
 
-def _recorder_cpu(env: _Env, seconds: float, settings_json: str = "{}") -> dict[str, float]:
+def _recorder_cpu(env: BenchEnv, seconds: float, settings_json: str = "{}") -> dict[str, float]:
     out = env.dir / "rec.mcap"
     rec = subprocess.Popen(
         [
@@ -255,14 +257,14 @@ def _recorder_cpu(env: _Env, seconds: float, settings_json: str = "{}") -> dict[
     for i in range(15):  # warm-up
         pub.put(frame_msg(i, rgb, depth))
         time.sleep(period)
-    cpu0, t0 = _cpu_s(rec.pid), time.monotonic()
+    cpu0, t0 = cpu_seconds(rec.pid), time.monotonic()
     t_next = t0
     for i in range(15, 15 + int(15 * seconds)):
         pub.put(frame_msg(i, rgb, depth))
         t_next += period
         time.sleep(max(0.0, t_next - time.monotonic()))
     time.sleep(0.6)  # let the last flush happen inside the window
-    cpu1, t1 = _cpu_s(rec.pid), time.monotonic()
+    cpu1, t1 = cpu_seconds(rec.pid), time.monotonic()
     rec.send_signal(signal.SIGTERM)
     rec.wait(timeout=30)
     return {
@@ -292,7 +294,7 @@ def _recorder_rounds(seconds: float, rounds: int, progress: bool) -> dict[str, A
                     file=sys.stderr,
                     flush=True,
                 )
-            env = _Env()
+            env = BenchEnv()
             try:
                 per[suffix].append(_recorder_cpu(env, max(seconds, 5.0), settings_json))
             finally:
@@ -306,7 +308,7 @@ def _recorder_rounds(seconds: float, rounds: int, progress: bool) -> dict[str, A
     return out
 
 
-def _cpu_s(pid: int) -> float:
+def cpu_seconds(pid: int) -> float:
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
@@ -336,7 +338,7 @@ def run_bus_bench(seconds: float = 3.0, rounds: int = 3, progress: bool = True) 
                         file=sys.stderr,
                         flush=True,
                     )
-                env = _Env()
+                env = BenchEnv()
                 try:
                     lat = _measure(env, mode, kind, rate, seconds)
                 finally:

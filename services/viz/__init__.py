@@ -43,7 +43,7 @@ class Settings(ServiceSettings):
         default=15.0, ge=0, description="Most camera images per sim second drawn (0: all)."
     )
     depth_max_rate_hz: float = Field(
-        default=5.0,
+        default=2.0,
         ge=0,
         description="Most depth images and trunk masks per sim second drawn (0: none).",
     )

@@ -32,7 +32,7 @@ from services.viz.sink import SinkError, open_stream
 log = logging.getLogger("viz")
 
 FRAME_TOPIC = "camera/rgbd"
-FLUSH_EVERY_S = 0.2  # buffered plots and poses reach the viewer at least this often
+FLUSH_EVERY_S = 0.2  # buffered plots and poses reach the viewer this often (their latency)
 
 
 class LiveViz:
@@ -60,20 +60,21 @@ class LiveViz:
             self.cv.notify()
 
     def run(self) -> None:
-        """Worker loop; returns once stopping and the queue is drained."""
+        """Worker loop; returns once stopping and the queue is drained. Buffered plots and
+        poses are sent every FLUSH_EVERY_S: one send_columns per entity and flush is what makes
+        them cheap (flushing after every message cost 5x the CPU, BENCHMARKS.md)."""
         last_flush = time.monotonic()
         while True:
             with self.cv:
                 if not self.q and not self.stopping:
-                    self.cv.wait(timeout=FLUSH_EVERY_S)
+                    self.cv.wait(timeout=max(0.0, FLUSH_EVERY_S - (time.monotonic() - last_flush)))
                 item = self.q.popleft() if self.q else None
                 if item is not None and item.key == FRAME_TOPIC:
                     self.pending_frames -= 1
                 done = item is None and self.stopping
             if item is not None:
                 self._draw(item)
-            idle = item is None or not self.q
-            if self.out.pending and (idle or time.monotonic() - last_flush > FLUSH_EVERY_S):
+            if self.out.pending and time.monotonic() - last_flush >= FLUSH_EVERY_S:
                 self.out.flush()
                 last_flush = time.monotonic()
             if done:

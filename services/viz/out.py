@@ -2,8 +2,8 @@
 
 High-rate numeric series (scalars, joint transforms) are buffered per entity and sent with
 ``send_columns`` on ``flush``: 14-25x cheaper than one ``log`` call per row (BENCHMARKS.md).
-Live, the service flushes whenever its input queue runs empty (or every ``flush_every_s``);
-offline, the converter flushes every ``max_rows`` rows and at the end. Everything else is
+Live, the service flushes every 0.2 s; offline, the converter flushes every ``max_rows`` rows
+and at the end. Everything else is
 logged at once. Either way the rows carry the same sim-time index, so the result is the same.
 """
 

@@ -64,7 +64,7 @@ def read_rrd(path: Path) -> tuple[Counter[str], dict[str, set[str]], list[Any]]:
 def fixture_rrd(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, ViewReport]:
     out = tmp_path_factory.mktemp("viz") / "fixture.rrd"
     rr.set_strict_mode(True)
-    return out, to_rrd(fx.PATH, out)
+    return out, to_rrd(fx.PATH, out, depth_max_rate_hz=5.0)
 
 
 def test_rrd_holds_every_drawing_with_the_expected_counts(
@@ -172,7 +172,7 @@ def test_live_flushing_gives_the_same_rows_as_offline(
     from services.recorder.inspect import iter_messages
 
     out = tmp_path / "live.rrd"
-    s = Settings()
+    s = Settings(depth_max_rate_hz=5.0)
     rec = open_stream(s, "viz-fixture", out)
     o = Out(rec)
     conv = Converter(o, s)
