@@ -42,6 +42,13 @@ def open_stream(settings: Settings, recording_id: str, save_path: Path | None = 
     overrides ``settings.save_path``). Raises SinkError when none can be opened."""
     import rerun as rr
 
+    try:
+        return _open(rr, settings, recording_id, save_path)
+    except (RuntimeError, ValueError) as exc:  # e.g. a port in use, a viewer that will not start
+        raise SinkError(f"cannot open the Rerun stream: {exc}") from None
+
+
+def _open(rr: Any, settings: Settings, recording_id: str, save_path: Path | None) -> Any:
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
     sinks: list[Any] = []
     path = save_path or settings.save_path
@@ -71,7 +78,10 @@ def open_stream(settings: Settings, recording_id: str, save_path: Path | None = 
     rec.set_sinks(*sinks, default_blueprint=blueprint())
     if settings.viewer == "serve":
         if settings.web_port:
-            rr.serve_web_viewer(web_port=settings.web_port, open_browser=False, connect_to=url)
-            log.info("web viewer: http://127.0.0.1:%d (data at %s)", settings.web_port, url)
+            try:
+                rr.serve_web_viewer(web_port=settings.web_port, open_browser=False, connect_to=url)
+                log.info("web viewer: http://127.0.0.1:%d (data at %s)", settings.web_port, url)
+            except Exception as exc:  # a busy port must not end the gRPC stream
+                log.warning("no web viewer on port %d: %s", settings.web_port, exc)
         log.info("serving the stream: `rerun --connect %s`", url)
     return rec
