@@ -80,7 +80,7 @@ def bench_columns(rows: int = 2000) -> dict[str, float]:
     tree = load_urdf(Settings().urdf_path)
     joints = [j for j in tree.joints() if j.joint_type == "revolute"]
     rec = rr.RecordingStream("bench", recording_id="columns")
-    rec.memory_recording()
+    rec.save(str(Path(tempfile.mkdtemp(prefix="bench-viz-")) / "columns.rrd"))
     out = Out(rec, max_rows=10**9)
     values = np.random.default_rng(0).uniform(-1, 1, (rows, 7))
     res: dict[str, float] = {}
