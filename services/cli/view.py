@@ -34,6 +34,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="also render a headless screenshot of the result (needs a Vulkan driver; "
         "CPU-only: apt-get install mesa-vulkan-drivers)",
     )
+    p.add_argument(
+        "--window-size",
+        default="1600x900",
+        metavar="WxH",
+        help="size of the headless viewer for --screenshot, logical points (default 1600x900)",
+    )
     p.add_argument("--serve", action="store_true", help="serve a gRPC + web viewer; Ctrl-C ends")
     p.add_argument(
         "--set",
@@ -93,7 +99,11 @@ def _convert(
 
         assert out is not None
         try:
-            con.print(f"screenshot {screenshot(out, args.screenshot)}")
+            w, h = (int(x) for x in args.window_size.lower().split("x"))
+            con.print(f"screenshot {screenshot(out, args.screenshot, (w, h))}")
+        except ValueError:
+            print(f"harvest view: --window-size {args.window_size!r} is not WxH", file=sys.stderr)
+            return 1
         except ScreenshotError as exc:
             print(f"harvest view: screenshot failed: {exc}", file=sys.stderr)
             return 1

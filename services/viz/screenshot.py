@@ -9,6 +9,7 @@ it shoots before a larger file has finished loading; this waits for the load.
 from __future__ import annotations
 
 import os
+import signal
 import socket
 import subprocess
 import time
@@ -69,16 +70,31 @@ def screenshot(
         time.sleep(settle_s)
         client.save_screenshot(str(png.resolve()))
     finally:
-        viewer.terminate()
-        try:
-            viewer.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            viewer.kill()
-            viewer.wait()
+        stop_group(viewer)
     if not png.exists():
         raise ScreenshotError(f"the viewer saved no screenshot; see {log}")
     log.unlink(missing_ok=True)
     return png
+
+
+def stop_group(p: subprocess.Popen[bytes], timeout_s: float = 10.0) -> None:
+    """Stop the viewer and its children: `rerun` from the venv is a launcher that runs the real
+    binary as a child, so the whole process group (its own session) must go."""
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        try:
+            os.killpg(p.pid, sig)
+        except ProcessLookupError:
+            break
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            p.poll()  # reap the launcher so that only live members keep the group
+            try:
+                os.killpg(p.pid, 0)
+            except ProcessLookupError:
+                p.wait()
+                return
+            time.sleep(0.05)
+    p.wait()
 
 
 def _connect(

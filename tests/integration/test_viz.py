@@ -113,8 +113,23 @@ def test_headless_screenshot_renders_the_blueprint(tmp_path: Path) -> None:
 
     png = tmp_path / "shot.png"
     out = tmp_path / "x.rrd"
-    r = harvest("view", str(fx.PATH), "--out", str(out), "--screenshot", str(png), timeout=180)
+    size = "1234x777"  # marks this test's viewer among the machine's processes
+    args = ("--out", str(out), "--screenshot", str(png), "--window-size", size)
+    r = harvest("view", str(fx.PATH), *args, timeout=180)
     assert r.returncode == 0, r.stdout + r.stderr
     image = cv2.imread(str(png))
-    assert image is not None and image.shape[0] >= 900 and image.shape[1] >= 1600
+    assert image is not None and image.shape[0] >= 777 and image.shape[1] >= 1234
     assert image.std() > 20  # drawn views, not a blank window
+    assert not _processes_with(f"--window-size {size}")  # the viewer and its launcher are gone
+
+
+def _processes_with(text: str) -> list[int]:
+    found = []
+    for proc in (p for p in Path("/proc").iterdir() if p.name.isdigit()):
+        try:
+            cmd = (proc / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+        except OSError:
+            continue
+        if text in cmd:
+            found.append(int(proc.name))
+    return found
