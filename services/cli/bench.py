@@ -1,4 +1,4 @@
-"""`harvest bench ...`: benchmarks (bus for now; later sim, controller, harvest)."""
+"""`harvest bench ...`: benchmarks (bus, viz; later sim, controller, harvest)."""
 
 from __future__ import annotations
 
@@ -25,6 +25,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--rounds", type=int, default=3, help="repetitions, ours and raw interleaved")
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(func=cmd_bench_bus)
+    v = bsub.add_parser(
+        "viz",
+        help="what drawing a run costs: log vs send_columns, offline, live CPU",
+        description="Rerun log calls per row vs buffered send_columns; `harvest view` speed "
+        "on a synthetic 640x480 recording; CPU of the live viz service at 15 Hz RGB-D and "
+        "100 Hz joint states (default settings and raw images); .rrd size per sim minute.",
+    )
+    v.add_argument("--seconds", type=float, default=10.0, help="sim seconds per measurement")
+    v.add_argument("--rounds", type=int, default=3, help="repetitions (medians are reported)")
+    v.add_argument("--json", action="store_true", help="print one JSON object")
+    v.set_defaults(func=cmd_bench_viz)
 
 
 def cmd_bench_bus(args: argparse.Namespace) -> int:
@@ -32,4 +43,17 @@ def cmd_bench_bus(args: argparse.Namespace) -> int:
 
     result = run_bus_bench(args.seconds, args.rounds, progress=not args.json)
     print(json.dumps(result, indent=2) if args.json else table(result))
+    return 0
+
+
+def cmd_bench_viz(args: argparse.Namespace) -> int:
+    from services.viz.bench import run_viz_bench
+
+    result = run_viz_bench(args.seconds, args.rounds, progress=not args.json)
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        for k, v in result.items():
+            if not k.endswith("_rounds"):
+                print(f"{k:40} {v:10.2f}")
     return 0

@@ -6,7 +6,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from services.cli import bench, files, live, replay, run
+from services.cli import bench, files, live, replay, run, view
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -17,6 +17,7 @@ def build_parser() -> argparse.ArgumentParser:
     live.add_parsers(sub)
     files.add_parsers(sub)
     replay.add_parsers(sub)
+    view.add_parser(sub)
     bench.add_parser(sub)
     return ap
 

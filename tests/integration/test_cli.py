@@ -21,6 +21,7 @@ def _subcommands() -> list[list[str]]:
     sub = next(a for a in ap._actions if a.dest == "command")
     out = [[name] for name in sub.choices]  # type: ignore[union-attr]
     out.append(["bench", "bus"])
+    out.append(["bench", "viz"])
     return out
 
 
