@@ -37,8 +37,8 @@ from services.sim.visuals import (
     environment_objects,
     fruit_objects,
     hand_objects,
-    leaf_cluster_objects,
     sky,
+    sway_objects,
     tree_objects,
 )
 from services.sim.world import World, build_world
@@ -226,9 +226,8 @@ class SimCore:
         objs = list(self.static_objects)
         offsets = self.timeline.leaf_offsets(t)
         if offsets:
-            moving = {self.world.leaves[i].cluster for i in offsets}
-            swayed = {o.key: o for o in leaf_cluster_objects(self.world, moving, offsets, self.k)}
-            objs = [swayed.get(o.key, o) for o in objs]
+            split = {o.key: o for o in sway_objects(self.world, offsets, self.k)}
+            objs = [split.pop(o.key, o) for o in objs] + list(split.values())
         for st in self.fruits.all:
             if not st.removed:
                 objs += fruit_objects(

@@ -207,16 +207,30 @@ class RobotVisuals:
         return out
 
 
-def leaf_cluster_objects(
-    w: World, clusters: set[int], offsets: dict[int, np.ndarray], version: object
-) -> list[RenderObject]:
-    """Only the leaf clusters in ``clusters``, with displaced leaves (for swaying leaves)."""
-    prims: dict[int, list[Prim]] = {k: [] for k in clusters}
+def sway_objects(w: World, offsets: dict[int, np.ndarray], version: object) -> list[RenderObject]:
+    """Clusters with swaying leaves, split in two: ``leaves/<k>`` keeps the still leaves (it
+    stays cached) and ``sway/<k>`` holds the displaced ones (redrawn every frame)."""
+    still: dict[int, list[Prim]] = {}
+    moving: dict[int, list[Prim]] = {}
+    clusters = {w.leaves[i].cluster for i in offsets}
     for i, leaf in enumerate(w.leaves):
-        if leaf.cluster in prims:
-            c = leaf.centre + offsets.get(i, 0.0)
-            m = Material(leaf.rgb, "leaf", seed=w.seed + i)
-            prims[leaf.cluster].append(
-                Prim(Shape.LEAF, (leaf.half_length, leaf.half_width, 0.0), leaf.R, c, m)
+        if leaf.cluster not in clusters:
+            continue
+        m = Material(leaf.rgb, "leaf", seed=w.seed + i)
+        size = (leaf.half_length, leaf.half_width, 0.0)
+        if i in offsets:
+            prim = Prim(Shape.LEAF, size, leaf.R, leaf.centre + offsets[i], m)
+            moving.setdefault(leaf.cluster, []).append(prim)
+        else:
+            still.setdefault(leaf.cluster, []).append(
+                Prim(Shape.LEAF, size, leaf.R, leaf.centre, m)
             )
-    return [RenderObject(f"leaves/{k}", "leaf", prims[k], version=version) for k in sorted(prims)]
+    out = [
+        RenderObject(f"leaves/{k}", "leaf", still.get(k, []), version="split")
+        for k in sorted(clusters)
+    ]
+    out += [
+        RenderObject(f"sway/{k}", "leaf", moving[k], version=version, bakeable=False)
+        for k in sorted(moving)
+    ]
+    return out

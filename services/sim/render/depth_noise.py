@@ -70,7 +70,7 @@ class D435Noise:
         holes = ~valid | self._shadow(z, valid)
         u = rng.random((H, W), dtype=F32)
         holes |= self._edges(z) & (u < self.edge_hole_p)
-        grey = rgb.mean(axis=2, dtype=F32) * F32(1 / 255)
+        grey = (rgb[..., 0].astype(np.uint16) + rgb[..., 1] + rgb[..., 2]) * F32(1 / 765)
         holes |= u > F32(1 - self.speckle_p)
         dark = grey < self.dark_level
         holes |= dark & (u < F32(1) - grey / F32(self.dark_level))

@@ -24,6 +24,7 @@ from services.sim.render.shading import LightCam, Lighting, Material, light_in_c
 
 F32 = np.float32
 Rect = tuple[int, int, int, int]  # v0, v1, u0, u1 (end exclusive)
+_CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
 
 
 @dataclass
@@ -249,8 +250,7 @@ class Renderer:
     def _screen_rect(self, cs: CamShape) -> Rect | None:
         """Pixels the shape can cover: projection of its bounding box's corners."""
         H, W = self.camera.height, self.camera.width
-        signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-        corners = cs.p[None, :] + (signs * cs.size[None, :]) @ cs.R.T
+        corners = cs.p + (_CORNERS * cs.size) @ cs.R.T
         z = corners[:, 2]
         if z.max() <= self.camera.near_m:
             return None

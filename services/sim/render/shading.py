@@ -103,10 +103,10 @@ def albedo(m: Material, local: np.ndarray) -> np.ndarray:
         v = F32(0.9) + k * F32(0.22) * (
             value_noise(local * np.array([70, 70, 7], F32), m.seed) - F32(0.5)
         )
-    elif m.texture == "leaf":  # a lighter midrib along x, mottling
-        mid = np.abs(local[:, 1]) < F32(0.0018)
-        v = F32(0.94) + k * F32(0.12) * value_noise(local * F32(120), m.seed)
-        v = np.where(mid, v * F32(1.18), v)
+    elif m.texture == "leaf":  # a lighter midrib along x, darker towards the tip (cheap: leaves
+        # sway, so they are redrawn often)
+        v = F32(0.97) - k * F32(2.5) * np.abs(local[:, 0])
+        v = np.where(np.abs(local[:, 1]) < F32(0.0018), v * F32(1.18), v)
     elif m.texture == "ground":
         v = F32(0.75) + k * (
             F32(0.35) * value_noise(local * F32(2.5), m.seed)
