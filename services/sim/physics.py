@@ -19,6 +19,7 @@ from services.sim.world import World
 
 FRUIT_DENSITY_KG_M3 = 850.0
 ROBOT_MOTOR_FORCE = 2000.0
+TOUCH_M = 0.001  # pybullet also reports points a little apart: touching = closer than this
 
 
 def ellipsoid_vertices(semi_axes: tuple[float, float, float], n: int = 10) -> list[list[float]]:
@@ -176,7 +177,7 @@ class Physics:
         pairs = {
             (self.link_name[cp[3]], cp[2])
             for cp in self.pb.getContactPoints(bodyA=self.robot, physicsClientId=self.cid)
-            if cp[2] != self.robot
+            if cp[2] != self.robot and cp[8] < TOUCH_M
         }
         return sorted(pairs)
 
@@ -209,6 +210,8 @@ class Physics:
         """Names of what fruit i touches ('ground', 'trunk', 'robot/<link>', 'fruit_3', ...)."""
         out = set()
         for cp in self.pb.getContactPoints(bodyA=self.fruit_body[i], physicsClientId=self.cid):
+            if cp[8] >= TOUCH_M:
+                continue
             body = cp[2]
             name = self.names.get(body, f"body_{body}")
             out.add(f"robot/{self.link_name[cp[4]]}" if body == self.robot else name)

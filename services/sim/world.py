@@ -299,7 +299,7 @@ def _heavy_cover(w: World, f: Fruit, cluster: int, rng: np.random.Generator) -> 
 
 def _bark(rng: np.random.Generator) -> tuple[float, float, float]:
     """Bark colour inside the paper's trunk mask (OpenCV H 10–20, S 70–130, V 80–140) once lit."""
-    v = rng.uniform(0.44, 0.48)
+    v = rng.uniform(0.54, 0.57)
     s = rng.uniform(0.38, 0.44)
     h = rng.uniform(28, 32) / 60  # hue 28–32° → OpenCV H 14–16
     lo = v * (1 - s)
