@@ -58,7 +58,7 @@ def test_a_known_point_lands_on_its_pixel_and_depth(p_cam: tuple[float, float, f
     vs, us = np.nonzero(out.label == 0)
     u, v = cam.project(np.array(p_cam))
     assert abs(us.mean() - u) < 0.5 and abs(vs.mean() - v) < 0.5
-    iu, iv = int(round(u)), int(round(v))
+    iu, iv = round(float(u)), round(float(v))
     x, y = (
         (iu - cam.intrinsics.cx_px) / cam.intrinsics.fx_px,
         (iv - cam.intrinsics.cy_px) / cam.intrinsics.fy_px,

@@ -73,7 +73,7 @@ def test_bad_scenarios_are_refused_with_the_field_named(change: dict, field: str
 def test_a_sim_with_a_bad_scenario_refuses_to_start(tmp_path: Path) -> None:
     p = tmp_path / "bad.yaml"
     p.write_text("name: bad\nfruits: [{position_world_m: [0.6, 0, 1.3], radius_m: -1}]\n")
-    with pytest.raises(ConfigError, match="fruits.0.radius_m"):
+    with pytest.raises(ConfigError, match=r"fruits\.0\.radius_m"):
         core(p)
     with pytest.raises(ConfigError, match="scenario not found"):
         core("no-such-scenario")

@@ -94,6 +94,7 @@ def albedo(m: Material, local: np.ndarray) -> np.ndarray:
     """Per-pixel albedo (n, 3) for local hit points (n, 3)."""
     base = np.asarray(m.rgb, F32)[None, :]
     k = F32(m.strength)
+    v: np.ndarray
     if m.texture == "peel":  # large blotches + fine dimples
         v = F32(0.93) + k * (
             F32(0.1) * value_noise(local * F32(45), m.seed)
