@@ -1,4 +1,4 @@
-"""`harvest bench ...`: benchmarks (bus for now; later sim, controller, harvest)."""
+"""`harvest bench ...`: benchmarks (bus, sim; later controller, harvest)."""
 
 from __future__ import annotations
 
@@ -25,11 +25,31 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--rounds", type=int, default=3, help="repetitions, ours and raw interleaved")
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(func=cmd_bench_bus)
+    s = bsub.add_parser(
+        "sim",
+        help="sim: render ms per 640x480 RGB-D frame, real-time factor on one core",
+        description="Runs the sim core in-process pinned to one core, camera at 15 Hz and "
+        "control at 120 Hz, with a fake controller moving both arms through the view, then "
+        "still; every output encoded. Also an uncached render and pybullet's TinyRenderer.",
+    )
+    s.add_argument("--scenario", default="paper-exp1", help="scenario (default paper-exp1)")
+    s.add_argument("--seconds", type=float, default=10.0, help="sim seconds with arms moving")
+    s.add_argument("--no-tiny", action="store_true", help="skip the TinyRenderer comparison")
+    s.add_argument("--json", action="store_true", help="print one JSON object")
+    s.set_defaults(func=cmd_bench_sim)
 
 
 def cmd_bench_bus(args: argparse.Namespace) -> int:
     from services.bus.bench import run_bus_bench, table
 
     result = run_bus_bench(args.seconds, args.rounds, progress=not args.json)
+    print(json.dumps(result, indent=2) if args.json else table(result))
+    return 0
+
+
+def cmd_bench_sim(args: argparse.Namespace) -> int:
+    from services.sim.bench import run_sim_bench, table
+
+    result = run_sim_bench(args.scenario, args.seconds, tiny=not args.no_tiny)
     print(json.dumps(result, indent=2) if args.json else table(result))
     return 0

@@ -145,6 +145,9 @@ class SimCore:
         self.physics.step()
         self.q = self.q + qd * self.dt
         self.qd = qd
+        # Hold pybullet at the published state: motors drift by ~1e-9 rad during a step, and
+        # frames, truth and the cache must see exactly the joint state that is published.
+        self.physics.set_robot(self.q, self.qd)
         self.pending += self.fruits.after_step()
         self._count_contacts()
         self.k += 1

@@ -168,6 +168,17 @@ def hand_objects(R: np.ndarray, p: np.ndarray, version: object) -> list[RenderOb
     return [RenderObject("hand", "hand", prims, version=version, bakeable=False)]
 
 
+ROBOT_PIECE_M = 0.1  # robot cylinders are drawn in pieces this long: tighter screen rectangles
+
+
+def _pieces(size: tuple, Rl: np.ndarray, pl: np.ndarray) -> list[tuple[tuple, np.ndarray]]:
+    """A long cylinder as shorter coaxial ones (the same solid: the inner caps are hidden)."""
+    r, _, h = size
+    n = max(1, int(np.ceil(2 * h / ROBOT_PIECE_M)))
+    axis = Rl[:, 2]
+    return [((r, r, h / n), pl + axis * (-h + h / n * (2 * i + 1))) for i in range(n)]
+
+
 class RobotVisuals:
     """The robot's visual shapes from pybullet (so the picture is the URDF), posed per frame."""
 
@@ -187,7 +198,10 @@ class RobotVisuals:
             else:
                 continue
             m = Material((rgba[0], rgba[1], rgba[2]), "plain")
-            self.shapes.setdefault(link, []).append((shape, size, rot_of(lq), lp, m))
+            Rl = rot_of(lq)
+            parts = _pieces(size, Rl, lp) if shape == Shape.CYLINDER else [(size, lp)]
+            for sz, p in parts:
+                self.shapes.setdefault(link, []).append((shape, sz, Rl, p, m))
         self.links = sorted(self.shapes)
         self.link_name = link_name
 
