@@ -6,7 +6,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from services.cli import bench, files, live, replay, run
+from services.cli import bench, dataset, files, live, replay, run
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -18,6 +18,7 @@ def build_parser() -> argparse.ArgumentParser:
     files.add_parsers(sub)
     replay.add_parsers(sub)
     bench.add_parser(sub)
+    dataset.add_parsers(sub)
     return ap
 
 

@@ -15,11 +15,10 @@ from typing import Any
 
 import numpy as np
 
-from schemas.base import Header
+from schemas.base import ARM_ROLES, ArmRole, Header
 from schemas.robot import ArmJointVelocity, JointVelocityCommand
 from schemas.topics import TOPICS
 from services.robot.model import joint_names
-from services.runtime.settings import load_settings
 
 
 def _pin_one_core() -> int:
@@ -32,11 +31,11 @@ def _command(stamp: int, seq: int, t_s: float) -> JointVelocityCommand:
     """Arms sweeping up and down through the camera's view (within the velocity limits)."""
     a = 0.35 * np.sin(2 * np.pi * t_s / 6.0)
     v = {"cutter_j2": a, "cutter_j4": -a, "collector_j2": -a, "collector_j1": 0.5 * a}
-    arms = {
+    arms: dict[ArmRole, ArmJointVelocity] = {
         r: ArmJointVelocity(
             names=joint_names(r), velocity_rad_s=tuple(v.get(n, 0.0) for n in joint_names(r))
         )
-        for r in ("cutter", "collector")
+        for r in ARM_ROLES
     }
     return JointVelocityCommand(header=Header(stamp_ns=stamp, seq=seq, source="bench"), arms=arms)
 
@@ -103,7 +102,7 @@ def run_sim_bench(
     from services.sim.render.renderer import Renderer
 
     cpu = _pin_one_core()
-    settings = load_settings(Settings, {"scenario": scenario})
+    settings = Settings(scenario=scenario)
     core = SimCore(settings)
     t0 = time.perf_counter()
     core.camera_group(0)  # the first frame draws everything (then the still objects are cached)
