@@ -20,7 +20,9 @@ SimEventKind = Literal[
     "command_rejected",
     "command_late",
 ]
-OccluderKind = Literal["trunk", "branch", "twig", "leaf", "fruit", "stem", "robot", "hand"]
+OccluderKind = Literal[
+    "trunk", "branch", "twig", "leaf", "fruit", "stem", "robot", "hand", "ground", "wall"
+]
 
 
 class FruitTruth(Frozen):

@@ -68,40 +68,26 @@ def sky(height: int, width: int, top=(0.55, 0.7, 0.92), bottom=(0.85, 0.9, 0.95)
     ).copy()
 
 
-def tree_objects(
-    w: World, leaf_offsets: dict[int, np.ndarray] | None = None, sway_version: object = 0
-) -> list[RenderObject]:
-    """Trunk, branches and leaf clusters; leaves in ``leaf_offsets`` (leaf index → world
-    displacement) are drawn moved and their clusters get ``sway_version``."""
+def tree_objects(w: World) -> list[RenderObject]:
+    """Trunk, branches and leaf clusters (still; swaying leaves: ``sway_objects``)."""
     bark = Material(w.bark_rgb, "bark", seed=w.seed)
-    objs = [
-        RenderObject(
-            "trunk", "trunk", [segment_cylinder(w.trunk.p0, w.trunk.p1, w.trunk.radius, bark)]
-        )
-    ]
+    trunk = segment_cylinder(w.trunk.p0, w.trunk.p1, w.trunk.radius, bark)
+    objs = [RenderObject("trunk", "trunk", [trunk])]
     for k, b in enumerate(w.branches):
-        objs.append(
-            RenderObject(f"branch/{k}", "branch", [segment_cylinder(b.p0, b.p1, b.radius, bark)])
-        )
+        prim = segment_cylinder(b.p0, b.p1, b.radius, bark)
+        objs.append(RenderObject(f"branch/{k}", "branch", [prim]))
     clusters: dict[int, list[Prim]] = {}
-    moving: set[int] = set()
-    offsets = leaf_offsets or {}
     for i, leaf in enumerate(w.leaves):
-        c = leaf.centre
-        if i in offsets:
-            c = c + offsets[i]
-            moving.add(leaf.cluster)
-        m = Material(leaf.rgb, "leaf", seed=w.seed + i)
-        clusters.setdefault(leaf.cluster, []).append(
-            Prim(Shape.LEAF, (leaf.half_length, leaf.half_width, 0.0), leaf.R, c, m)
-        )
-    for k in sorted(clusters):
-        objs.append(
-            RenderObject(
-                f"leaves/{k}", "leaf", clusters[k], version=sway_version if k in moving else 0
-            )
-        )
+        clusters.setdefault(leaf.cluster, []).append(_leaf_prim(w, i))
+    objs += [RenderObject(f"leaves/{k}", "leaf", clusters[k]) for k in sorted(clusters)]
     return objs
+
+
+def _leaf_prim(w: World, i: int, offset: np.ndarray | None = None) -> Prim:
+    leaf = w.leaves[i]
+    c = leaf.centre if offset is None else leaf.centre + offset
+    m = Material(leaf.rgb, "leaf", seed=w.seed + i)
+    return Prim(Shape.LEAF, (leaf.half_length, leaf.half_width, 0.0), leaf.R, c, m)
 
 
 def fruit_objects(
@@ -224,25 +210,17 @@ class RobotVisuals:
 def sway_objects(w: World, offsets: dict[int, np.ndarray], version: object) -> list[RenderObject]:
     """Clusters with swaying leaves, split in two: ``leaves/<k>`` keeps the still leaves (it
     stays cached) and ``sway/<k>`` holds the displaced ones (redrawn every frame)."""
-    still: dict[int, list[Prim]] = {}
-    moving: dict[int, list[Prim]] = {}
     clusters = {w.leaves[i].cluster for i in offsets}
+    still: dict[int, list[Prim]] = {k: [] for k in clusters}
+    moving: dict[int, list[Prim]] = {}
     for i, leaf in enumerate(w.leaves):
         if leaf.cluster not in clusters:
             continue
-        m = Material(leaf.rgb, "leaf", seed=w.seed + i)
-        size = (leaf.half_length, leaf.half_width, 0.0)
         if i in offsets:
-            prim = Prim(Shape.LEAF, size, leaf.R, leaf.centre + offsets[i], m)
-            moving.setdefault(leaf.cluster, []).append(prim)
+            moving.setdefault(leaf.cluster, []).append(_leaf_prim(w, i, offsets[i]))
         else:
-            still.setdefault(leaf.cluster, []).append(
-                Prim(Shape.LEAF, size, leaf.R, leaf.centre, m)
-            )
-    out = [
-        RenderObject(f"leaves/{k}", "leaf", still.get(k, []), version="split")
-        for k in sorted(clusters)
-    ]
+            still[leaf.cluster].append(_leaf_prim(w, i))
+    out = [RenderObject(f"leaves/{k}", "leaf", still[k], version="split") for k in sorted(still)]
     out += [
         RenderObject(f"sway/{k}", "leaf", moving[k], version=version, bakeable=False)
         for k in sorted(moving)

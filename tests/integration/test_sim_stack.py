@@ -1,5 +1,6 @@
-"""The sim as a real process: under the supervisor in lock-step, recorded; the recording holds
-15 Hz frames, 120 Hz joint states and the truth, and plays back through camera_file."""
+"""The sim as a real process: under the supervisor in lock-step, recorded; two runs give the same
+bytes; the recording holds 15 Hz frames, 120 Hz joint states and the truth, and plays back
+through camera_file."""
 
 from __future__ import annotations
 
@@ -38,19 +39,21 @@ services:
     main: true
     settings: {{scenario: {sc}, duration_s: 1.0}}
 """)
-    r = harvest(
-        "run",
-        "--stack",
-        str(stack),
-        "--run-id",
-        "simrun",
-        "--quiet",
-        "--listen",
-        f"unixsock-stream/{d}/s.sock",
-    )
-    assert r.returncode == 0, r.stdout + r.stderr
+    for run in ("simrun", "again"):
+        r = harvest(
+            "run",
+            "--stack",
+            str(stack),
+            "--run-id",
+            run,
+            "--quiet",
+            "--listen",
+            f"unixsock-stream/{d}/{run}.sock",
+        )
+        assert r.returncode == 0, r.stdout + r.stderr
     mcap = d / "rec" / "simrun.mcap"
     rec = payloads_by_topic(mcap)
+    assert rec == payloads_by_topic(d / "rec" / "again.mcap")  # two processes, same bytes
     assert len(rec["robot/joint_state"]) == 121  # ticks 0 .. 120 of 1 s at 120 Hz
     assert len(rec["camera/rgbd"]) == len(rec["sim/truth"]) == 16  # every 8th tick: 15 Hz
     frames = [TOPICS["camera/rgbd"].codec.decode(p) for _, p in rec["camera/rgbd"]]
