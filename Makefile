@@ -28,6 +28,7 @@ lint: $(STAMP)
 bench: $(STAMP)
 	$(VENV)/bin/harvest bench bus
 	$(VENV)/bin/harvest bench viz
+	$(VENV)/bin/harvest bench sim
 
 # A headless screenshot of a recording (CPU-only machines: apt-get install mesa-vulkan-drivers)
 VIEW ?= tests/fixtures/viz_small.mcap

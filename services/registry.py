@@ -11,6 +11,9 @@ SERVICE_MODULES: dict[str, str] = {
     "demo_clock": "services.demo_clock",
     "demo_worker": "services.demo_worker",
     "viz": "services.viz",
+    "sim": "services.sim",
+    "camera_file": "services.camera_file",
+    "realsense": "services.realsense",
 }
 
 

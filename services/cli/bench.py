@@ -1,4 +1,4 @@
-"""`harvest bench ...`: benchmarks (bus, viz; later sim, controller, harvest)."""
+"""`harvest bench ...`: benchmarks (bus, viz, sim; later controller, harvest)."""
 
 from __future__ import annotations
 
@@ -36,6 +36,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     v.add_argument("--rounds", type=int, default=3, help="repetitions (medians are reported)")
     v.add_argument("--json", action="store_true", help="print one JSON object")
     v.set_defaults(func=cmd_bench_viz)
+    s = bsub.add_parser(
+        "sim",
+        help="sim: render ms per 640x480 RGB-D frame, real-time factor on one core",
+        description="Runs the sim core in-process pinned to one core, camera at 15 Hz and "
+        "control at 120 Hz, with a fake controller moving both arms through the view, then "
+        "still; every output encoded. Also an uncached render and pybullet's TinyRenderer.",
+    )
+    s.add_argument("--scenario", default="paper-exp1", help="scenario (default paper-exp1)")
+    s.add_argument("--seconds", type=float, default=10.0, help="sim seconds with arms moving")
+    s.add_argument("--no-tiny", action="store_true", help="skip the TinyRenderer comparison")
+    s.add_argument("--json", action="store_true", help="print one JSON object")
+    s.set_defaults(func=cmd_bench_sim)
 
 
 def cmd_bench_bus(args: argparse.Namespace) -> int:
@@ -56,4 +68,11 @@ def cmd_bench_viz(args: argparse.Namespace) -> int:
         for k, v in result.items():
             if not k.endswith("_rounds"):
                 print(f"{k:40} {v:10.2f}")
+
+
+def cmd_bench_sim(args: argparse.Namespace) -> int:
+    from services.sim.bench import run_sim_bench, table
+
+    result = run_sim_bench(args.scenario, args.seconds, tiny=not args.no_tiny)
+    print(json.dumps(result, indent=2) if args.json else table(result))
     return 0

@@ -6,7 +6,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from services.cli import bench, files, live, replay, run, view
+from services.cli import bench, dataset, files, live, replay, run, view
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -19,6 +19,7 @@ def build_parser() -> argparse.ArgumentParser:
     replay.add_parsers(sub)
     view.add_parser(sub)
     bench.add_parser(sub)
+    dataset.add_parsers(sub)
     return ap
 
 

@@ -39,7 +39,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--set",
         action="append",
         metavar="SERVICE.KEY=VALUE",
-        help="override a service setting, e.g. demo_clock.ticks=50; repeatable",
+        help="override a service setting, e.g. sim.duration_s=60; repeatable",
     )
     p.add_argument("--run-id", help="run id (default run-<date>-<time>-<random>)")
     p.add_argument("--listen", help="router endpoint (overrides the stack's router.listen)")
