@@ -68,6 +68,7 @@ def cmd_bench_viz(args: argparse.Namespace) -> int:
         for k, v in result.items():
             if not k.endswith("_rounds"):
                 print(f"{k:40} {v:10.2f}")
+    return 0
 
 
 def cmd_bench_sim(args: argparse.Namespace) -> int:
