@@ -5,7 +5,7 @@ PYTHON ?= python3
 VENV := .venv
 STAMP := $(VENV)/.installed
 
-.PHONY: run test lint bench clean
+.PHONY: run test lint bench screenshot clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -28,6 +28,14 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(VENV)/bin/harvest bench bus
+	$(VENV)/bin/harvest bench viz
+	$(VENV)/bin/harvest bench sim
+
+# A headless screenshot of a recording (CPU-only machines: apt-get install mesa-vulkan-drivers)
+VIEW ?= tests/fixtures/viz_small.mcap
+SHOT ?= docs/viz_fixture.png
+screenshot: $(STAMP)
+	$(VENV)/bin/harvest view $(VIEW) --screenshot $(SHOT)
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache

@@ -22,7 +22,7 @@ from schemas.scene import (
     Trunk,
 )
 from schemas.service import DemoAnswer, DemoTick, NodeSpecModel, ServiceStatus, TopicCounters
-from schemas.sim import FruitTruth, GroundTruth, SimEvent, TrunkTruth
+from schemas.sim import FruitTruth, GroundTruth, SimCounters, SimEvent, TrunkTruth
 from schemas.topics import TOPICS, Topic, UnknownTopicError, topic
 
 __all__ = [
@@ -61,6 +61,7 @@ __all__ = [
     "RunSummary",
     "SceneState",
     "ServiceStatus",
+    "SimCounters",
     "SimEvent",
     "ToolCommand",
     "Topic",

@@ -10,6 +10,10 @@ SERVICE_MODULES: dict[str, str] = {
     "recorder": "services.recorder",
     "demo_clock": "services.demo_clock",
     "demo_worker": "services.demo_worker",
+    "viz": "services.viz",
+    "sim": "services.sim",
+    "camera_file": "services.camera_file",
+    "realsense": "services.realsense",
     "detector": "services.detector",
     "tracker": "services.tracker",
 }

@@ -142,7 +142,9 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
-class _Env:
+class BenchEnv:
+    """A private router on a free TCP port and a publisher session (also used by the viz bench)."""
+
     def __init__(self) -> None:
         self.dir = Path(tempfile.mkdtemp(prefix="bench-bus-"))
         self.endpoint = f"tcp/127.0.0.1:{_free_port()}"
@@ -175,7 +177,7 @@ class _Env:
         self.router.wait()
 
 
-def _measure(env: _Env, mode: str, kind: str, rate_hz: float, seconds: float) -> list[int]:
+def _measure(env: BenchEnv, mode: str, kind: str, rate_hz: float, seconds: float) -> list[int]:
     out = env.dir / f"{mode}-{kind}.json"
     sub = subprocess.Popen(
         [
@@ -233,7 +235,7 @@ def _measure(env: _Env, mode: str, kind: str, rate_hz: float, seconds: float) ->
     return lat[20:]  # warm-up
 
 
-def _recorder_cpu(env: _Env, seconds: float) -> dict[str, float]:
+def _recorder_cpu(env: BenchEnv, seconds: float, settings_json: str = "{}") -> dict[str, float]:
     out = env.dir / "rec.mcap"
     rec = subprocess.Popen(
         [
@@ -242,6 +244,8 @@ def _recorder_cpu(env: _Env, seconds: float) -> dict[str, float]:
             "services.recorder",
             "--out",
             str(out),
+            "--settings-json",
+            settings_json,
             *bus_args(BusSettings(connect=(env.endpoint,), namespace=env.ns)),
         ],
         stderr=subprocess.DEVNULL,
@@ -253,14 +257,14 @@ def _recorder_cpu(env: _Env, seconds: float) -> dict[str, float]:
     for i in range(15):  # warm-up
         pub.put(frame_msg(i, rgb, depth))
         time.sleep(period)
-    cpu0, t0 = _cpu_s(rec.pid), time.monotonic()
+    cpu0, t0 = cpu_seconds(rec.pid), time.monotonic()
     t_next = t0
     for i in range(15, 15 + int(15 * seconds)):
         pub.put(frame_msg(i, rgb, depth))
         t_next += period
         time.sleep(max(0.0, t_next - time.monotonic()))
     time.sleep(0.6)  # let the last flush happen inside the window
-    cpu1, t1 = _cpu_s(rec.pid), time.monotonic()
+    cpu1, t1 = cpu_seconds(rec.pid), time.monotonic()
     rec.send_signal(signal.SIGTERM)
     rec.wait(timeout=30)
     return {
@@ -269,7 +273,42 @@ def _recorder_cpu(env: _Env, seconds: float) -> dict[str, float]:
     }
 
 
-def _cpu_s(pid: int) -> float:
+RECORDER_VARIANTS = {
+    "": "{}",
+    "_no_preview": '{"preview": "none"}',
+    "_raw_preview": '{"preview": "raw"}',
+    "_full_jpeg_preview": '{"preview_scale": 1.0}',
+}
+"""Default settings (JPEG camera preview at half resolution), no preview, a lossless rgb8 preview
+at half resolution, a JPEG preview at full resolution."""
+
+
+def _recorder_rounds(seconds: float, rounds: int, progress: bool) -> dict[str, Any]:
+    """Recorder CPU and file size, with and without the camera preview, interleaved; medians."""
+    per: dict[str, list[dict[str, float]]] = {k: [] for k in RECORDER_VARIANTS}
+    for r in range(rounds):
+        for suffix, settings_json in RECORDER_VARIANTS.items():
+            if progress:
+                print(
+                    f"  round {r + 1}/{rounds}: recorder at 15 Hz RGB-D {settings_json}",
+                    file=sys.stderr,
+                    flush=True,
+                )
+            env = BenchEnv()
+            try:
+                per[suffix].append(_recorder_cpu(env, max(seconds, 5.0), settings_json))
+            finally:
+                env.close()
+    out: dict[str, Any] = {}
+    for suffix, results in per.items():
+        for key in results[0]:
+            values = [x[key] for x in results]
+            out[f"{key}{suffix}"] = float(np.median(values))
+            out[f"{key}{suffix}_rounds"] = values
+    return out
+
+
+def cpu_seconds(pid: int) -> float:
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
@@ -299,7 +338,7 @@ def run_bus_bench(seconds: float = 3.0, rounds: int = 3, progress: bool = True) 
                         file=sys.stderr,
                         flush=True,
                     )
-                env = _Env()
+                env = BenchEnv()
                 try:
                     lat = _measure(env, mode, kind, rate, seconds)
                 finally:
@@ -315,13 +354,7 @@ def run_bus_bench(seconds: float = 3.0, rounds: int = 3, progress: bool = True) 
     for kind in ("small", "frame"):
         pairs = zip(per[("ours", kind)], per[("raw", kind)], strict=True)
         res[f"{kind}_ratio_p50"] = float(np.median([o[0] / w[0] for o, w in pairs]))
-    if progress:
-        print("  recorder CPU at 15 Hz RGB-D", file=sys.stderr, flush=True)
-    env = _Env()
-    try:
-        res.update(_recorder_cpu(env, max(seconds, 5.0)))
-    finally:
-        env.close()
+    res.update(_recorder_rounds(seconds, rounds, progress))
     res["small_bytes"] = len(TOPICS[SMALL_KEY].codec.encode(small_msg(0)))
     res["frame_bytes"] = len(TOPICS[FRAME_KEY].codec.encode(frame_msg(0, *test_images())))
     return res
@@ -350,7 +383,11 @@ def table(r: dict[str, Any]) -> str:
     ]
     lines = [f"{'case':36} {'ours':>16} {'raw zenoh':>16} {'ratio':>6}"]
     lines += [f"{a:36} {b:>16} {c:>16} {d:>6}" for a, b, c, d in rows]
-    lines.append(f"recorder CPU at 15 Hz RGB-D: {r['recorder_cpu_pct_15hz']:.1f} % of one core")
+    lines.append(
+        f"recorder CPU at 15 Hz RGB-D: {r['recorder_cpu_pct_15hz']:.1f} % of one core with the "
+        f"camera preview, {r['recorder_cpu_pct_15hz_no_preview']:.1f} % without; file "
+        f"{r['recorder_mb_written']:.1f} MB vs {r['recorder_mb_written_no_preview']:.1f} MB"
+    )
     return "\n".join(lines)
 
 

@@ -1,4 +1,4 @@
-"""`harvest bench ...`: benchmarks (bus, detector, tracker; later sim, controller, harvest)."""
+"""`harvest bench ...`: benchmarks (bus, viz, sim, detector, tracker; later controller, harvest)."""
 
 from __future__ import annotations
 
@@ -27,6 +27,29 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--rounds", type=int, default=3, help="repetitions, ours and raw interleaved")
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(func=cmd_bench_bus)
+    v = bsub.add_parser(
+        "viz",
+        help="what drawing a run costs: log vs send_columns, offline, live CPU",
+        description="Rerun log calls per row vs buffered send_columns; `harvest view` speed "
+        "on a synthetic 640x480 recording; CPU of the live viz service at 15 Hz RGB-D and "
+        "100 Hz joint states (default settings and raw images); .rrd size per sim minute.",
+    )
+    v.add_argument("--seconds", type=float, default=10.0, help="sim seconds per measurement")
+    v.add_argument("--rounds", type=int, default=3, help="repetitions (medians are reported)")
+    v.add_argument("--json", action="store_true", help="print one JSON object")
+    v.set_defaults(func=cmd_bench_viz)
+    s = bsub.add_parser(
+        "sim",
+        help="sim: render ms per 640x480 RGB-D frame, real-time factor on one core",
+        description="Runs the sim core in-process pinned to one core, camera at 15 Hz and "
+        "control at 120 Hz, with a fake controller moving both arms through the view, then "
+        "still; every output encoded. Also an uncached render and pybullet's TinyRenderer.",
+    )
+    s.add_argument("--scenario", default="paper-exp1", help="scenario (default paper-exp1)")
+    s.add_argument("--seconds", type=float, default=10.0, help="sim seconds with arms moving")
+    s.add_argument("--no-tiny", action="store_true", help="skip the TinyRenderer comparison")
+    s.add_argument("--json", action="store_true", help="print one JSON object")
+    s.set_defaults(func=cmd_bench_sim)
     bench_perception.add_parsers(bsub)
 
 
@@ -34,5 +57,26 @@ def cmd_bench_bus(args: argparse.Namespace) -> int:
     from services.bus.bench import run_bus_bench, table
 
     result = run_bus_bench(args.seconds, args.rounds, progress=not args.json)
+    print(json.dumps(result, indent=2) if args.json else table(result))
+    return 0
+
+
+def cmd_bench_viz(args: argparse.Namespace) -> int:
+    from services.viz.bench import run_viz_bench
+
+    result = run_viz_bench(args.seconds, args.rounds, progress=not args.json)
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        for k, v in result.items():
+            if not k.endswith("_rounds"):
+                print(f"{k:40} {v:10.2f}")
+    return 0
+
+
+def cmd_bench_sim(args: argparse.Namespace) -> int:
+    from services.sim.bench import run_sim_bench, table
+
+    result = run_sim_bench(args.scenario, args.seconds, tiny=not args.no_tiny)
     print(json.dumps(result, indent=2) if args.json else table(result))
     return 0

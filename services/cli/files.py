@@ -65,7 +65,8 @@ def cmd_info(args: argparse.Namespace) -> int:
     for col in ("topic", "schema", "encoding", "messages"):
         t.add_column(col, justify="right" if col == "messages" else "left")
     for c in info.channels:
-        t.add_row(c.topic, c.schema_name or "-", c.message_encoding, str(c.count))
+        enc = f"{c.message_encoding} (derived)" if c.derived else c.message_encoding
+        t.add_row(c.topic, c.schema_name or "-", enc, str(c.count))
     con.print(t)
     con.print(
         f"{info.message_count} messages, {info.duration_s:.3f} s "

@@ -6,7 +6,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from services.cli import bench, evaluate, files, live, replay, run, train
+from services.cli import bench, dataset, evaluate, files, live, replay, run, train, view
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -17,7 +17,9 @@ def build_parser() -> argparse.ArgumentParser:
     live.add_parsers(sub)
     files.add_parsers(sub)
     replay.add_parsers(sub)
+    view.add_parser(sub)
     bench.add_parser(sub)
+    dataset.add_parsers(sub)
     train.add_parsers(sub)
     evaluate.add_parsers(sub)
     return ap

@@ -92,7 +92,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
         print(f"harvest replay: {exc}", file=sys.stderr)
         return 1
     keep = topic_filter(args.include, args.exclude)
-    recorded = {c.topic for c in info.channels}
+    recorded = {c.topic for c in info.channels if not c.derived}  # derived: never replayed
     published = {t for t in recorded if keep(t)}
     with bus:
         awaited: set[str] = set()

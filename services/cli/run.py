@@ -13,7 +13,14 @@ from rich.table import Table
 from services.cli.ui import console
 from services.recorder.inspect import RecordingError, read_info
 from services.runtime.settings import SettingsError, parse_overrides
-from services.supervisor.stack import StackError, load_stack
+from services.supervisor.stack import (
+    RestartPolicy,
+    ServiceEntry,
+    Stack,
+    StackError,
+    deep_merge,
+    load_stack,
+)
 from services.supervisor.supervisor import RunResult, Supervisor
 
 DEFAULT_STACK = Path("deploy/stack.yaml")
@@ -32,13 +39,39 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--set",
         action="append",
         metavar="SERVICE.KEY=VALUE",
-        help="override a service setting, e.g. demo_clock.ticks=50; repeatable",
+        help="override a service setting, e.g. sim.duration_s=60; repeatable",
     )
     p.add_argument("--run-id", help="run id (default run-<date>-<time>-<random>)")
     p.add_argument("--listen", help="router endpoint (overrides the stack's router.listen)")
     p.add_argument("--no-record", action="store_true", help="do not record an MCAP")
     p.add_argument("--quiet", action="store_true", help="no service logs on the terminal")
+    p.add_argument(
+        "--view",
+        action="store_true",
+        help="add the viz service and open a Rerun viewer (served on --viz-port when there is "
+        "no display)",
+    )
+    p.add_argument("--save", type=Path, metavar="RRD", help="add the viz service; write an .rrd")
+    p.add_argument("--viz-port", type=int, default=9876, help="gRPC port of the viewer (--view)")
     p.set_defaults(func=cmd_run)
+
+
+def with_viz(stack: Stack, view: bool, save: Path | None, port: int) -> dict[str, ServiceEntry]:
+    """The stack's services plus the viz service (its settings merged if the stack has one)."""
+    from services.viz.sink import has_display
+
+    settings: dict[str, object] = {"grpc_port": port}
+    if view:
+        settings["viewer"] = "spawn" if has_display() else "serve"
+    if save is not None:
+        settings["save_path"] = str(save.resolve())
+    old = stack.services.get("viz")
+    entry = (
+        old.model_copy(update={"settings": deep_merge(old.settings, settings), "enabled": True})
+        if old is not None
+        else ServiceEntry(settings=settings, restart=RestartPolicy(policy="on-failure"))
+    )
+    return {**stack.services, "viz": entry}
 
 
 def new_run_id() -> str:
@@ -58,6 +91,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         updates["recording"] = stack.recording.model_copy(update={"enabled": False})
     if args.listen:
         updates["router"] = stack.router.model_copy(update={"listen": (args.listen,)})
+    if args.view or args.save:
+        updates["services"] = with_viz(stack, args.view, args.save, args.viz_port)
     if updates:
         stack = stack.model_copy(update=updates)
     sup = Supervisor(stack, args.stack, args.run_id or new_run_id(), args.profile, quiet=args.quiet)

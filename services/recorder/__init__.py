@@ -29,6 +29,16 @@ class Settings(ServiceSettings):
         description="Chunks are flushed at least this often (SIGKILL loses at most this much).",
     )
     keyexpr: str = Field(default="**", description="What to record, as a key expression.")
+    preview: Literal["jpeg", "raw", "none"] = Field(
+        default="jpeg",
+        description="Derived Foxglove-protobuf camera channels (/preview/...) that Rerun and "
+        "Foxglove open with no code of ours: 'jpeg' (lossy), 'raw' (rgb8) or 'none'. The raw "
+        "camera/rgbd channel is recorded unchanged either way.",
+    )
+    preview_scale: float = Field(
+        default=0.5, gt=0, le=1, description="Preview resolution as a fraction of the camera's."
+    )
+    preview_jpeg_quality: int = Field(default=80, ge=1, le=100, description="JPEG quality.")
 
 
 SPEC = NodeSpec(inputs=("**",))

@@ -22,6 +22,7 @@ from schemas.service import ServiceState, ServiceStatus
 from services import __version__
 from services.bus import Bus, BusError, RawSample, add_bus_args, bus_settings_from_args
 from services.recorder import SERVICE, Settings
+from services.recorder.preview import CameraPreview
 from services.recorder.writer import RUN_METADATA, RunWriter
 from services.runtime.service import add_service_args, resolve_settings, setup_logging
 from services.runtime.settings import SettingsError, config_hash
@@ -126,7 +127,14 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:
         print(f"recorder: cannot write {out}: {exc.strerror}", file=sys.stderr)
         return 2
-    writer = RunWriter(stream, settings.compression, settings.chunk_size_bytes, settings.lz4_level)
+    preview = (
+        None
+        if settings.preview == "none"
+        else CameraPreview(settings.preview, settings.preview_scale, settings.preview_jpeg_quality)
+    )
+    writer = RunWriter(
+        stream, settings.compression, settings.chunk_size_bytes, settings.lz4_level, preview
+    )
     if meta:
         writer.add_metadata(RUN_METADATA, meta)
     try:
@@ -153,6 +161,11 @@ def main(argv: list[str] | None = None) -> int:
     stream.close()
     n = sum(st.messages for st in writer.stats.values())
     log.info("finished %s: %d messages on %d channels", out, n, len(writer.stats))
+    if writer.derived:
+        d = sum(st.messages for st in writer.derived.values())
+        log.info("plus %d derived preview messages (%s)", d, ", ".join(sorted(writer.derived)))
+    if writer.preview_errors:
+        log.warning("%d camera frames had no preview (undecodable pixels)", writer.preview_errors)
     return 0
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 from mcap.reader import make_reader
 from mcap.records import Channel, Schema
 
+from services.recorder.preview import DERIVED_FROM
 from services.recorder.writer import RUN_METADATA
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -32,6 +33,7 @@ class ChannelInfo:
     schema_name: str
     message_encoding: str
     count: int
+    derived: bool = False  # written by the recorder from another channel; not a bus topic
 
 
 @dataclass
@@ -103,6 +105,7 @@ def read_info(path: Path) -> RecordingInfo:
             _schema_name(summary.schemas, ch),
             ch.message_encoding,
             st.channel_message_counts.get(cid, 0),
+            DERIVED_FROM in ch.metadata,
         )
         for cid, ch in sorted(summary.channels.items(), key=lambda kv: kv[1].topic)
     ]
@@ -130,6 +133,7 @@ class RecordedMessage:
     publish_time_ns: int
     sequence: int
     encoding: str  # the Zenoh encoding it was published with
+    derived: bool = False  # a derived channel (e.g. the camera preview): never replayed
 
 
 def iter_messages(path: Path) -> Iterator[RecordedMessage]:
@@ -145,4 +149,5 @@ def iter_messages(path: Path) -> Iterator[RecordedMessage]:
                 msg.publish_time,
                 msg.sequence,
                 ch.metadata.get("zenoh_encoding", ""),
+                DERIVED_FROM in ch.metadata,
             )

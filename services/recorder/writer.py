@@ -13,6 +13,7 @@ from schemas.codec import DecodeError
 from schemas.topics import TOPICS
 from services import __version__
 from services.recorder.mcap_writer import Compression, LeanMcapWriter
+from services.recorder.preview import DERIVED_FROM, SOURCE_TOPIC, CameraPreview
 
 REJECTED_PREFIX = "_rejected/"
 RUN_METADATA = "run"
@@ -32,9 +33,12 @@ class RunWriter:
     compression: Compression = "lz4"
     chunk_size: int = 4 << 20
     lz4_level: int = 0
+    preview: CameraPreview | None = None
     stats: dict[str, ChannelStats] = field(default_factory=dict)
+    derived: dict[str, ChannelStats] = field(default_factory=dict)
     rejected: int = 0
     unknown: int = 0
+    preview_errors: int = 0
 
     def __post_init__(self) -> None:
         self._w = LeanMcapWriter(self.stream, self.chunk_size, self.compression, self.lz4_level)
@@ -72,7 +76,36 @@ class RunWriter:
             sequence=header.seq % (1 << 32),
         )
         self._count(key, payload)
+        if self.preview is not None and key == SOURCE_TOPIC:
+            self._write_derived(payload, log_time_ns, header.stamp_ns, header.seq)
         return "ok"
+
+    def _write_derived(self, payload: bytes, log_time_ns: int, stamp_ns: int, seq: int) -> None:
+        """The camera preview channels (see preview.py); a frame it cannot use is counted."""
+        assert self.preview is not None
+        try:
+            messages = self.preview.derive(payload)
+        except ValueError:
+            self.preview_errors += 1
+            return
+        for m in messages:
+            cid = self._channels.get(m.topic)
+            if cid is None:
+                cid = self._channels[m.topic] = self._register_derived(m.topic, m.schema_name)
+            self._w.add_message(cid, log_time_ns, m.data, stamp_ns, seq % (1 << 32))
+            st = self.derived.setdefault(m.topic, ChannelStats())
+            st.messages += 1
+            st.bytes += len(m.data)
+
+    def _register_derived(self, topic: str, schema_name: str) -> int:
+        assert self.preview is not None
+        sid = self._schemas.get(schema_name)
+        if sid is None:
+            sid = self._schemas[schema_name] = self._w.register_schema(
+                schema_name, "protobuf", self.preview.schemas[schema_name]
+            )
+        meta = {DERIVED_FROM: SOURCE_TOPIC, "content": self.preview.description}
+        return self._w.register_channel(topic, "protobuf", sid, meta)
 
     def _register_topic(self, key: str, encoding: str) -> int:
         t = TOPICS[key]

@@ -103,7 +103,7 @@ class Player:
                 break
             if self.progress:
                 self.progress(i)
-            if m.topic.startswith(REJECTED_PREFIX):
+            if m.derived or m.topic.startswith(REJECTED_PREFIX):
                 self.stats.skipped += 1
                 continue
             if m.topic in self.await_ and self.collector is not None and speed is None:

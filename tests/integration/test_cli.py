@@ -20,7 +20,7 @@ def _subcommands() -> list[list[str]]:
     ap = build_parser()
     sub = next(a for a in ap._actions if a.dest == "command")
     out = [[name] for name in sub.choices]  # type: ignore[union-attr]
-    out.append(["bench", "bus"])
+    out += [["bench", "bus"], ["bench", "viz"], ["bench", "sim"], ["dataset", "synth"]]
     return out
 
 

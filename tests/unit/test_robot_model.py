@@ -73,3 +73,11 @@ def test_fruit_04_to_09_m_in_front_of_the_camera_are_reachable_with_tools_forwar
     results = [s.reach(p) for p in grid(s)]
     reached = sum(r.reached for r in results)
     assert reached >= 0.95 * len(results), [r for r in results if not r.reached]
+
+
+def test_urdf_is_well_formed_xml() -> None:
+    """Rerun and strict XML parsers refuse '--' in comments (it happened)."""
+    import xml.etree.ElementTree as ET
+
+    root = ET.parse(URDF_PATH).getroot()
+    assert root.tag == "robot" and len(root.findall("joint")) > 14

@@ -1,0 +1,1 @@
+"""A vectorised ray caster for the sim's analytic shapes (ellipsoids, cylinders, boxes, leaves)."""

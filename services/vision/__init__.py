@@ -1,0 +1,1 @@
+"""Image processing shared by services (numpy and OpenCV only; no bus, no rerun)."""
