@@ -37,7 +37,17 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         description="Run scenario sequences (occluder sweeps, moved fruit, swaying leaves) "
         "through the detector and tracker cores and score the tracks against the truth.",
     )
-    t.add_argument("--scenario", required=True, help="scenario name (see --list)")
+    t.add_argument(
+        "--scenario",
+        required=True,
+        help="a sim scenario (deploy/scenarios/*.yaml, e.g. paper-exp1) or a scripted 2D one "
+        "(scripted-sweep, scripted-moved, scripted-leaves, scripted-occlusion-suite)",
+    )
+    t.add_argument(
+        "--duration-s",
+        type=float,
+        help="sim time per sequence (default: until the last event ends, plus 1 s)",
+    )
     t.add_argument("--seeds", default="0-4", help="seeds A-B (inclusive) or A,B,C")
     t.add_argument("--fruit", type=int, default=8, help="fruit per scripted scene")
     _detector_args(t)
@@ -53,6 +63,16 @@ def _detector_args(p: argparse.ArgumentParser) -> None:
         "--threshold", type=float, help="operating score threshold (default: the weights')"
     )
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
+
+
+def _json(result: dict) -> str:
+    """JSON with NaN (a metric with nothing to measure, e.g. no occluded frame) as null."""
+    clean = {k: (None if isinstance(v, float) and v != v else v) for k, v in result.items()}
+    return json.dumps(clean, indent=2)
+
+
+def _fmt(v: float) -> str:
+    return "n/a" if v != v else f"{v:.3f}"
 
 
 def parse_seeds(text: str) -> list[int]:
@@ -100,7 +120,7 @@ def cmd_eval_detector(args: argparse.Namespace) -> int:
             return 1
     result = {"data": str(args.data), "detector": low.name, **m.to_json()}
     if args.json:
-        print(json.dumps(result, indent=2))
+        print(_json(result))
         return 0
     t = Table(title=f"{low.name} on {args.data} ({m.images} images, {m.boxes} boxes)")
     for col in ("AP50", "AP50:95", "precision", "recall", "threshold", "ms/frame", "p90 ms"):
@@ -129,7 +149,7 @@ def cmd_eval_tracker(args: argparse.Namespace) -> int:
 
     try:
         seeds = parse_seeds(args.seeds)
-        seqs = [make_sequence(args.scenario, s, args.fruit) for s in seeds]
+        seqs = [make_sequence(args.scenario, s, args.fruit, args.duration_s) for s in seeds]
         dsettings = _detector_settings(args, expected_size_px=None)
         tsettings = load_settings(TrackerSettings, overrides=parse_overrides(args.set))
         DetectorCore(dsettings)  # refuse bad weights before the long run
@@ -153,12 +173,12 @@ def cmd_eval_tracker(args: argparse.Namespace) -> int:
             )
     result = {"scenario": args.scenario, "seeds": seeds, **summarize(records, stats)}
     if args.json:
-        print(json.dumps(result, indent=2))
+        print(_json(result))
         return 0
     t = Table(title=f"tracker on {args.scenario}, seeds {args.seeds} ({stats.frames} frames)")
     cols = {
-        "ID ok (occl.)": f"{result['id_correct_occluded']:.3f} ({result['frames_occluded']})",
-        "ID ok (clear)": f"{result['id_correct_clear']:.3f} ({result['frames_clear']})",
+        "ID ok (occl.)": f"{_fmt(result['id_correct_occluded'])} ({result['frames_occluded']})",
+        "ID ok (clear)": f"{_fmt(result['id_correct_clear'])} ({result['frames_clear']})",
         "HOTA": f"{result['hota']:.3f}",
         "IDF1": f"{result['idf1']:.3f}",
         "MOTA": f"{result['mota']:.3f}",

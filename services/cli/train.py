@@ -8,6 +8,9 @@ import shlex
 import sys
 from pathlib import Path
 
+DEFAULT_TRAIN = ("synth:400:1", "scripted@0.1")
+DEFAULT_VAL = ("synth:100:2",)
+
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("train", help="train models (the detector)", description=__doc__)
@@ -22,19 +25,26 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     d.add_argument(
         "--data",
         action="append",
-        metavar="FILE.json[:WEIGHT]",
-        help="a training set in the shared JSON format, or 'scripted' (scripted 2D scenes drawn "
-        "fresh), and its share of the draws (repeatable; default: oranges_real/train.json and "
-        "scripted:0.35)",
+        metavar="SET[@WEIGHT]",
+        help="a training set and its share of the draws (repeatable). SET: a file in the shared "
+        "JSON format; synth:N:SEED (the sim's renders, `harvest dataset synth`, rendered once "
+        "into --synth-cache); scripted (scripted 2D scenes, drawn fresh). Default: "
+        f"oranges_real/train.json, {', '.join(DEFAULT_TRAIN)}",
     )
     d.add_argument(
         "--val",
         action="append",
-        metavar="FILE.json",
-        help="a validation set for model selection, or 'scripted' (60 seeded scripted frames) "
-        "(repeatable; default: oranges_real/val.json and scripted)",
+        metavar="SET",
+        help="a validation set for model selection (repeatable; the mean AP50 is maximised). "
+        f"Default: oranges_real/val.json, {', '.join(DEFAULT_VAL)}",
     )
     d.add_argument("--out-dir", type=Path, default=Path("runs/detector"), help="checkpoints")
+    d.add_argument(
+        "--synth-cache",
+        type=Path,
+        default=Path("runs/synth"),
+        help="where synth:N:SEED data sets are rendered once and reused",
+    )
     d.add_argument("--weights", type=Path, help="where to write the selected weights")
     d.add_argument("--epochs", type=int, default=60)
     d.add_argument("--iters-per-epoch", type=int, default=40)
@@ -46,24 +56,17 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     d.set_defaults(func=cmd_train_detector)
 
 
-def _spec(arg: str):
-    from services.detector.train import DataSpec
-
-    path, _, weight = arg.partition(":")
-    return DataSpec(path, None, float(weight) if weight else 1.0)
-
-
 def cmd_train_detector(args: argparse.Namespace) -> int:
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
     from services.detector.data import DatasetError
     from services.detector.paths import DEFAULT_WEIGHTS, real_data_dir
-    from services.detector.train import TrainConfig, finalize, pick_device, train
+    from services.detector.train import TrainConfig, finalize, parse_spec, pick_device, train
 
     real = real_data_dir()
     cfg = TrainConfig(
-        train=[_spec(a) for a in (args.data or [str(real / "train.json"), "scripted:0.35"])],
-        val=[_spec(a) for a in (args.val or [str(real / "val.json"), "scripted"])],
+        train=[parse_spec(a) for a in (args.data or [str(real / "train.json"), *DEFAULT_TRAIN])],
+        val=[parse_spec(a) for a in (args.val or [str(real / "val.json"), *DEFAULT_VAL])],
         out_dir=str(args.out_dir),
         weights_out=str(args.weights or DEFAULT_WEIGHTS),
         epochs=args.epochs,
@@ -72,6 +75,7 @@ def cmd_train_detector(args: argparse.Namespace) -> int:
         lr=args.lr,
         seed=args.seed,
         threads=args.threads,
+        synth_cache=str(args.synth_cache),
     )
     print(f"training on {pick_device()}; checkpoints in {cfg.out_dir}", file=sys.stderr)
     try:

@@ -21,7 +21,7 @@ import numpy as np
 import torch
 
 from services.detector.augment import mosaic, photometric, random_placement
-from services.detector.data import Sample, load_dataset
+from services.detector.data import DatasetError, Sample, load_dataset
 from services.detector.evaluate import evaluate
 from services.detector.infer import OrangeDetector, save_weights
 from services.detector.net import NetConfig, OrangeNet
@@ -34,22 +34,60 @@ SCRIPTED_VAL_FRAMES = 60
 SCRIPTED_VAL_SEED = 10_000
 
 
+SYNTH_PREFIX = "synth:"
+"""``synth:FRAMES:SEED``: the sim's domain-randomised renders (`harvest dataset synth --frames
+FRAMES --seed SEED`), rendered once into the synth cache folder and reused."""
+
+
 @dataclass
 class DataSpec:
-    """One data set file (or ``scripted``), its images root, and its share of the draws."""
+    """One data set file (or ``scripted``, or ``synth:FRAMES:SEED``), its images root, and
+    its share of the training draws."""
 
     json_path: str
     images_root: str | None = None
     weight: float = 1.0
 
 
-def resolve_val(specs: list[DataSpec], out_dir: Path) -> list[DataSpec]:
-    """Validation specs with ``scripted`` replaced by its (written once) data set file."""
+def parse_spec(arg: str) -> DataSpec:
+    """``NAME[@WEIGHT]`` → DataSpec (NAME: a JSON file, ``scripted`` or ``synth:N:SEED``)."""
+    name, _, weight = arg.partition("@")
+    return DataSpec(name, None, float(weight) if weight else 1.0)
+
+
+def synth_dataset(frames: int, seed: int, cache_dir: Path, log: Callable[[str], None]) -> Path:
+    """labels.json of the sim's synthetic renders (frames, seed), rendered if not cached."""
+    out = cache_dir / f"synth-n{frames}-s{seed}"
+    labels = out / "labels.json"
+    if labels.exists() and len(json.loads(labels.read_text())) == frames:
+        return labels
+    from services.sim.dataset import synth
+
+    log(f"rendering {frames} synthetic frames (seed {seed}) into {out} ...")
+    synth(out, frames, seed)
+    return labels
+
+
+def resolve(
+    specs: list[DataSpec],
+    out_dir: Path | None,
+    cache_dir: Path,
+    log: Callable[[str], None] = print,
+) -> list[DataSpec]:
+    """Specs with ``synth:N:SEED`` replaced by the rendered data set, and (validation only)
+    ``scripted`` by a seeded scripted data set written once into the run folder."""
     from services.testkit.scene2d import write_dataset
 
     out = []
     for s in specs:
-        if s.json_path == SCRIPTED:
+        if s.json_path.startswith(SYNTH_PREFIX):
+            try:
+                _, n, seed = s.json_path.split(":")
+                path = synth_dataset(int(n), int(seed), cache_dir, log)
+            except ValueError:
+                raise DatasetError(f"{s.json_path!r}: expected synth:FRAMES:SEED") from None
+            s = DataSpec(str(path), None, s.weight)
+        elif s.json_path == SCRIPTED and out_dir is not None:
             path = out_dir / "scripted-val" / "scripted_val.json"
             if not path.exists():
                 write_dataset(path.parent, SCRIPTED_VAL_FRAMES, SCRIPTED_VAL_SEED, path.name)
@@ -75,6 +113,7 @@ class TrainConfig:
     eval_every: int = 2
     seed: int = 0
     threads: int = 2
+    synth_cache: str = "runs/synth"
     net: dict[str, Any] = field(default_factory=lambda: NetConfig().to_dict())
 
 
@@ -181,7 +220,8 @@ def train(
     opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     out = Path(cfg.out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    cfg.val = resolve_val(cfg.val, out)
+    cfg.train = resolve(cfg.train, None, Path(cfg.synth_cache), log)
+    cfg.val = resolve(cfg.val, out, Path(cfg.synth_cache), log)
     (out / "config.json").write_text(json.dumps(asdict(cfg), indent=2))
     start_epoch = 0
     best: dict[str, Any] = {"score": -1.0, "epoch": -1, "metrics": {}}
@@ -271,7 +311,7 @@ def finalize(cfg: TrainConfig, summary: dict[str, Any], command: str) -> dict[st
     from services.detector.infer import load_weights
 
     device = pick_device()
-    cfg.val = resolve_val(cfg.val, Path(cfg.out_dir))
+    cfg.val = resolve(cfg.val, Path(cfg.out_dir), Path(cfg.synth_cache))
     best = load_weights(Path(cfg.out_dir) / "best.pt")
     net = best.net.to(device)
     threshold = choose_threshold(net, cfg.val, device)

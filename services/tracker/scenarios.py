@@ -59,27 +59,38 @@ def scripted(name: str, seed: int, n_fruit: int = 8, n_frames: int = SCRIPTED_FR
     return frames
 
 
-def sim_sequence(name: str, seed: int, max_frames: int | None = None) -> Sequence:
-    """The pybullet simulator's scenario ``name``, run in process (its core, no bus): every
-    camera/rgbd frame is paired with the sim/truth of the same frame seq."""
-    from services.registry import SERVICE_MODULES, service_def
-    from services.runtime.settings import load_settings
+SIM_TAIL_S = 1.0
+"""A sim scenario runs until its last event ends plus this, so the tracker is scored on the
+fruit after the last occlusion too."""
 
-    if "sim" not in SERVICE_MODULES:
-        raise KeyError(
-            f"unknown scenario {name!r}: the simulator is not in this build; scripted "
-            f"scenarios: {', '.join(sorted(SCRIPTED))}"
-        )
+
+def sim_sequence(name: str, seed: int, duration_s: float | None = None) -> Sequence:
+    """The pybullet simulator's scenario ``name``, run in process (its core, no bus, no
+    controller: the robot holds still): every camera/rgbd frame is paired with the sim/truth
+    of the same frame seq. An occlusion is active when the sim says so (``occluder_active``:
+    the hand occluder's pixels are in the image)."""
+    from services.registry import service_def
+    from services.runtime.settings import load_settings
+    from services.sim.scenario import ScenarioError, load_scenario
+
+    try:
+        scenario = load_scenario(name)
+    except ScenarioError as exc:
+        raise KeyError(f"{exc}; scripted scenarios: {', '.join(sorted(SCRIPTED))}") from None
+    if duration_s is None:
+        ends = [e.start_s + e.duration_s for e in scenario.events]
+        duration_s = max(ends, default=10.0) + SIM_TAIL_S
     sd = service_def("sim")
-    settings = load_settings(sd.settings, {"scenario": name, "seed": seed}, service="sim")
+    settings = load_settings(
+        sd.settings, {"scenario": name, "seed": seed, "duration_s": duration_s}, service="sim"
+    )
     assert sd.make_core is not None
 
     def frames() -> Iterator[TruthFrame]:
         core = sd.make_core(settings)  # type: ignore[misc]
         pending: dict[int, Any] = {}
         truths: dict[int, Any] = {}
-        n = 0
-        while not core.done() and (max_frames is None or n < max_frames):
+        while not core.done():
             for group in core.emit():
                 for topic, msg in group:
                     if topic == "camera/rgbd":
@@ -93,19 +104,23 @@ def sim_sequence(name: str, seed: int, max_frames: int | None = None) -> Sequenc
                     for f in truth.fruits
                     if f.box_xyxy_px is not None and f.state == "attached"
                 )
-                n += 1
                 yield TruthFrame(frame, fruits, truth.occluder_active)
             core.advance()
+        core.close()
 
     return frames
 
 
 def scenario_names() -> list[str]:
-    return sorted(SCRIPTED)
+    from services.sim.scenario import SCENARIO_DIR
+
+    return sorted(SCRIPTED) + sorted(p.stem for p in SCENARIO_DIR.glob("*.yaml"))
 
 
-def make_sequence(name: str, seed: int, n_fruit: int = 8) -> Sequence:
+def make_sequence(
+    name: str, seed: int, n_fruit: int = 8, duration_s: float | None = None
+) -> Sequence:
     """The sequence of scenario ``name`` with ``seed``: a scripted one, or else the sim's."""
     if name in SCRIPTED:
         return scripted(name, seed, n_fruit)
-    return sim_sequence(name, seed)
+    return sim_sequence(name, seed, duration_s)
