@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import os
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 from rich.progress import Progress
@@ -50,14 +53,20 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     )
     t.add_argument("--seeds", default="0-4", help="seeds A-B (inclusive) or A,B,C")
     t.add_argument("--fruit", type=int, default=8, help="fruit per scripted scene")
-    _detector_args(t)
+    _detector_args(t, truth=True)
     t.add_argument("--set", action="append", metavar="KEY=VALUE", help="tracker setting")
     t.add_argument("--json", action="store_true", help="print one JSON object")
     t.set_defaults(func=cmd_eval_tracker)
 
 
-def _detector_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--backend", choices=["net", "hsv"], default="net", help="detector backend")
+def _detector_args(p: argparse.ArgumentParser, truth: bool = False) -> None:
+    p.add_argument(
+        "--backend",
+        choices=["net", "hsv", "truth"] if truth else ["net", "hsv"],
+        default="net",
+        help="detector backend"
+        + ("; truth: the true visible boxes, to score the tracker alone" if truth else ""),
+    )
     p.add_argument("--weights", type=Path, help="OrangeNet weights (default: the committed ones)")
     p.add_argument(
         "--threshold", type=float, help="operating score threshold (default: the weights')"
@@ -69,6 +78,24 @@ def _json(result: dict) -> str:
     """JSON with NaN (a metric with nothing to measure, e.g. no occluded frame) as null."""
     clean = {k: (None if isinstance(v, float) and v != v else v) for k, v in result.items()}
     return json.dumps(clean, indent=2)
+
+
+@contextlib.contextmanager
+def _stdout_to_stderr(active: bool) -> Iterator[None]:
+    """Send file descriptor 1 to stderr while active: C libraries (pybullet prints its build
+    time) must not spoil the one JSON object on stdout."""
+    if not active:
+        yield
+        return
+    sys.stdout.flush()
+    saved = os.dup(1)
+    os.dup2(2, 1)
+    try:
+        yield
+    finally:
+        sys.stdout.flush()
+        os.dup2(saved, 1)
+        os.close(saved)
 
 
 def _fmt(v: float) -> str:
@@ -144,28 +171,30 @@ def cmd_eval_tracker(args: argparse.Namespace) -> int:
     from services.runtime.settings import SettingsError, load_settings, parse_overrides
     from services.tracker import Settings as TrackerSettings
     from services.tracker.core import TrackerCore
-    from services.tracker.run_eval import RunStats, run_sequence, summarize
+    from services.tracker.run_eval import RunStats, TruthDetector, run_sequence, summarize
     from services.tracker.scenarios import make_sequence
 
     try:
         seeds = parse_seeds(args.seeds)
         seqs = [make_sequence(args.scenario, s, args.fruit, args.duration_s) for s in seeds]
-        dsettings = _detector_settings(args, expected_size_px=None)
+        truth = args.backend == "truth"
+        dsettings = None if truth else _detector_settings(args, expected_size_px=None)
         tsettings = load_settings(TrackerSettings, overrides=parse_overrides(args.set))
-        DetectorCore(dsettings)  # refuse bad weights before the long run
+        if dsettings is not None:
+            DetectorCore(dsettings)  # refuse bad weights before the long run
     except (KeyError, ValueError, ConfigError, SettingsError) as exc:
         msg = exc.args[0] if isinstance(exc, KeyError) else exc
         print(f"harvest eval tracker: {msg}", file=sys.stderr)
         return 1
     stats = RunStats()
     records = []
-    with Progress(transient=True, disable=args.json) as bar:
+    with _stdout_to_stderr(args.json), Progress(transient=True, disable=args.json) as bar:
         task = bar.add_task(f"eval tracker on {args.scenario}", total=None)
         for seq in seqs:
             records.append(
                 run_sequence(
                     seq,
-                    DetectorCore(dsettings),
+                    TruthDetector() if dsettings is None else DetectorCore(dsettings),
                     TrackerCore(tsettings),  # type: ignore[arg-type]
                     stats,
                     lambda: bar.advance(task),

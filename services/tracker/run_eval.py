@@ -9,8 +9,37 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from schemas.camera import RgbdFrame
+from schemas.perception import Detection, Detections
+from services.runtime import Output, Stamper
 from services.tracker.evaluate import FrameRecord, paper_metric, trackeval_metrics
-from services.tracker.scenarios import VISIBLE_MIN, Sequence
+from services.tracker.scenarios import VISIBLE_MIN, Sequence, TruthFrame
+
+
+class TruthDetector:
+    """Diagnostic stand-in for the detector (``--backend truth``): the visible fruit's true
+    boxes (visible fraction >= VISIBLE_MIN), to score the tracker alone."""
+
+    def __init__(self) -> None:
+        self.stamper = Stamper("detector")
+        self.truth: TruthFrame | None = None
+
+    def handle(self, topic: str, frame: RgbdFrame) -> list[Output]:
+        assert self.truth is not None and self.truth.frame is frame
+        h, w = frame.rgb.shape[:2]
+        dets = tuple(
+            Detection(xyxy_px=tuple(float(v) for v in b), score=1.0)  # type: ignore[arg-type]
+            for _, b, frac in self.truth.fruits
+            if frac >= VISIBLE_MIN
+        )
+        msg = Detections(
+            header=self.stamper.answer("perception/detections", frame.header),
+            image_width_px=w,
+            image_height_px=h,
+            detector="truth",
+            detections=dets,
+        )
+        return [("perception/detections", msg)]
 
 
 @dataclass
@@ -28,6 +57,8 @@ def run_sequence(
     for tf in seq():
         tracker.handle("camera/rgbd", tf.frame)
         t0 = time.perf_counter()
+        if isinstance(detector, TruthDetector):
+            detector.truth = tf
         ((_, dets),) = detector.handle("camera/rgbd", tf.frame)
         t1 = time.perf_counter()
         ((_, tracks),) = tracker.handle("perception/detections", dets)

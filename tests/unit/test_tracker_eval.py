@@ -45,3 +45,14 @@ def test_a_missing_track_fails_the_frame() -> None:
     seq = frames([(7, 8)] * 4, False)
     seq.append(FrameRecord(np.array([1, 2]), BOXES, np.array([7]), BOXES[:1], False))
     assert paper_metric(seq)["id_correct_clear"] == 0.8
+
+
+def test_sim_scenarios_pair_each_frame_with_its_truth() -> None:
+    from services.tracker.scenarios import make_sequence
+
+    frames = list(make_sequence("occlusion-suite", 0, duration_s=0.4)())
+    assert len(frames) == 6  # 15 Hz
+    for k, tf in enumerate(frames):
+        assert tf.frame.header.seq == k
+        assert tf.frame.rgb.shape == (480, 640, 3)
+        assert len(tf.fruits) >= 5 and all(0 < frac <= 1 for _, _, frac in tf.fruits)
