@@ -51,7 +51,7 @@ def test_sim_scenarios_pair_each_frame_with_its_truth() -> None:
     from services.tracker.scenarios import make_sequence
 
     frames = list(make_sequence("occlusion-suite", 0, duration_s=0.4)())
-    assert len(frames) == 6  # 15 Hz
+    assert len(frames) == 7  # 15 Hz, from t = 0 to 0.4 s inclusive
     for k, tf in enumerate(frames):
         assert tf.frame.header.seq == k
         assert tf.frame.rgb.shape == (480, 640, 3)
