@@ -10,6 +10,7 @@ SERVICE_MODULES: dict[str, str] = {
     "recorder": "services.recorder",
     "demo_clock": "services.demo_clock",
     "demo_worker": "services.demo_worker",
+    "controller": "services.controller",
 }
 
 
