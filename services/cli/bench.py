@@ -1,4 +1,4 @@
-"""`harvest bench ...`: benchmarks (bus for now; later sim, controller, harvest)."""
+"""`harvest bench ...`: benchmarks (bus, controller; later sim, harvest)."""
 
 from __future__ import annotations
 
@@ -25,11 +25,31 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--rounds", type=int, default=3, help="repetitions, ours and raw interleaved")
     b.add_argument("--json", action="store_true", help="print one JSON object")
     b.set_defaults(func=cmd_bench_bus)
+    c = bsub.add_parser(
+        "controller",
+        help="controller: cycle time vs fruit obstacles, closed-loop reach",
+        description="The controller core in closed loop with a kinematic sim: p50/p99 cycle "
+        "time with 0, 10, 50 and 200 fruit (message I/O apart), then reach success, time and "
+        "constraint violations on a fixed set of random targets the IK reaches.",
+    )
+    c.add_argument("--ticks", type=int, default=2000, help="control ticks per obstacle count")
+    c.add_argument("--targets", type=int, default=100, help="reach targets (0: skip reach)")
+    c.add_argument("--seed", type=int, default=6, help="seed of the scenes and the targets")
+    c.add_argument("--json", action="store_true", help="print one JSON object")
+    c.set_defaults(func=cmd_bench_controller)
 
 
 def cmd_bench_bus(args: argparse.Namespace) -> int:
     from services.bus.bench import run_bus_bench, table
 
     result = run_bus_bench(args.seconds, args.rounds, progress=not args.json)
+    print(json.dumps(result, indent=2) if args.json else table(result))
+    return 0
+
+
+def cmd_bench_controller(args: argparse.Namespace) -> int:
+    from services.controller.bench import run_controller_bench, table
+
+    result = run_controller_bench(args.ticks, args.targets, args.seed, progress=not args.json)
     print(json.dumps(result, indent=2) if args.json else table(result))
     return 0

@@ -139,6 +139,8 @@ SPEC = NodeSpec(
     inputs=("robot/joint_state", "plan/target", "scene/state"),
     outputs=("robot/command", "control/status", "diag/controller"),
     answers={"robot/joint_state": ("robot/command", "control/status")},
+    # live mode: act on the freshest state only (lock-step never drops anything)
+    conflate=("robot/joint_state", "plan/target", "scene/state"),
 )
 
 

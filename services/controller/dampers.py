@@ -28,7 +28,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from services.controller.distances import PairDistance, PairKind
-from services.controller.geometry import cross
 from services.controller.robot import N_FBASE_Q, N_FBASE_V, ControlledRobot
 
 _FIXED_JOINT = 1  # joints 0 (universe) and 1 (placo's floating base, masked) never move
@@ -75,37 +74,53 @@ def damper_rows(
     dt_s: float,
 ) -> DamperRows:
     """One row per pair within its activation distance (see the module docstring)."""
-    nq = robot.model.nq
-    q = robot.q_full
-    jac: dict[int, np.ndarray] = {}
-    rows_A: list[np.ndarray] = []
-    rows_b: list[float] = []
-    for pr in pairs:
-        ddot = _point_row(robot, jac, pr.joint2, pr.p2_world_m, pr.normal)
-        ddot -= _point_row(robot, jac, pr.joint1, pr.p1_world_m, pr.normal)
-        arm = ddot[N_FBASE_V:]
-        if not np.any(np.abs(arm) > 1e-12):
-            continue  # neither body can move: no joint step changes this distance
-        a = np.zeros(nq)
-        a[N_FBASE_Q:] = -arm
-        rows_A.append(a)
-        rows_b.append(
-            float(a[N_FBASE_Q:] @ q[N_FBASE_Q:])
-            - dt_s * params[pr.kind].ddot_min_m_s(pr.distance_m, dt_s)
-        )
-    if not rows_A:
+    nq, nv = robot.model.nq, robot.model.nv
+    if not pairs:
         return inactive_rows(nq)
-    return DamperRows(np.array(rows_A), np.array(rows_b), len(rows_A))
+    zero = np.zeros((6, nv))
+    jac: dict[int, np.ndarray] = {}
+
+    def J(joint: int) -> np.ndarray:
+        if joint <= _FIXED_JOINT:  # universe and the masked floating base never move
+            return zero
+        j = jac.get(joint)
+        if j is None:
+            j = jac[joint] = robot.joint_jacobian_world(joint)
+        return j
+
+    n = np.array([p.normal for p in pairs])  # (P, 3)
+    p1 = np.array([p.p1_world_m for p in pairs])
+    p2 = np.array([p.p2_world_m for p in pairs])
+    J1 = np.array([J(p.joint1) for p in pairs])  # (P, 6, nv)
+    J2 = np.array([J(p.joint2) for p in pairs])
+    # nᵀ J_p = [n, p × n]ᵀ J for a point p on a body with spatial Jacobian J (world, at 0)
+    w1 = np.concatenate([n, _cross(p1, n)], axis=1)  # (P, 6)
+    w2 = np.concatenate([n, _cross(p2, n)], axis=1)
+    ddot = np.einsum("pk,pkj->pj", w2, J2) - np.einsum("pk,pkj->pj", w1, J1)
+    arm = ddot[:, N_FBASE_V:]
+    movable = np.abs(arm).max(axis=1) > 1e-12  # else no joint step changes this distance
+    if not movable.any():
+        return inactive_rows(nq)
+    A = np.zeros((int(movable.sum()), nq))
+    A[:, N_FBASE_Q:] = -arm[movable]
+    bound = np.array(
+        [
+            params[p.kind].ddot_min_m_s(p.distance_m, dt_s)
+            for p, m in zip(pairs, movable, strict=True)
+            if m
+        ]
+    )
+    b = A[:, N_FBASE_Q:] @ robot.q_full[N_FBASE_Q:] - dt_s * bound
+    return DamperRows(A, b, len(A))
 
 
-def _point_row(
-    robot: ControlledRobot, jac: dict[int, np.ndarray], joint: int, p: np.ndarray, n: np.ndarray
-) -> np.ndarray:
-    """nᵀ J_p (nv,) for the point ``p`` (world) carried by ``joint``: nᵀ J_v + (p × n)ᵀ J_ω,
-    with J the joint's spatial Jacobian at the world origin."""
-    if joint <= _FIXED_JOINT:
-        return np.zeros(robot.model.nv)
-    J = jac.get(joint)
-    if J is None:
-        J = jac[joint] = robot.joint_jacobian_world(joint)
-    return n @ J[:3] + cross(p, n) @ J[3:]
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise a × b for (P, 3) arrays (np.cross's overhead is ~20 µs a call)."""
+    return np.stack(
+        [
+            a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
+            a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+            a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0],
+        ],
+        axis=1,
+    )

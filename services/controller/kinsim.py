@@ -27,11 +27,12 @@ class KinematicSim:
         q0_rad: Mapping[ArmRole, Sequence[float]] = HOME_RAD,
         period_ns: int = SIM_PERIOD_NS,
         source: str = "sim",
+        start_tick: int = 0,
     ) -> None:
         self.q: dict[ArmRole, np.ndarray] = {r: np.array(q0_rad[r], dtype=float) for r in ARM_ROLES}
         self.qd: dict[ArmRole, np.ndarray] = {r: np.zeros(7) for r in ARM_ROLES}
         self.period_ns = period_ns
-        self.tick = 0
+        self.tick = start_tick  # a later run on the same controller continues the clock
         self.source = source
 
     @property

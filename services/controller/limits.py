@@ -3,8 +3,6 @@ driving any joint past a position limit within the coming control period."""
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 VELOCITY_TOL = 1e-6  # relative, on |q̇| ≤ v_max (the QP's own round-off is far below)
@@ -25,7 +23,7 @@ def check_command(
     A joint already outside a position limit (a simulator overshoots by a hair) may hold or
     move back in, never further out.
     """
-    if len(qd_rad_s) != len(names) or not all(math.isfinite(float(v)) for v in qd_rad_s):
+    if len(qd_rad_s) != len(names) or not np.isfinite(qd_rad_s).all():
         return "non-finite or mis-sized velocity command"
     over = np.abs(qd_rad_s) > vmax_rad_s * (1 + VELOCITY_TOL)
     if over.any():

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -28,6 +29,13 @@ class ObstacleArrays:
     @property
     def count(self) -> int:
         return len(self.ellipsoid_centers_m) + len(self.cylinder_points_m)
+
+    @cached_property
+    def ellipsoid_bound_m(self) -> np.ndarray:
+        """(N,) radius of each ellipsoid's bounding sphere (its largest semi-axis), m."""
+        if not len(self.ellipsoid_semi_axes_m):
+            return np.zeros(0)
+        return self.ellipsoid_semi_axes_m.max(axis=1)
 
 
 EMPTY = ObstacleArrays(np.zeros((0, 3)), np.zeros((0, 3)), (), np.zeros((0, 3)), np.zeros(0))

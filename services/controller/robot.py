@@ -91,6 +91,10 @@ class ControlledRobot:
         outside (a simulator overshoots by a hair): the QP may then hold or move it back in but
         never further out, instead of being infeasible. Restores the URDF limits of joints that
         are back inside. Returns the names of joints outside their limits."""
+        if not self._widened and bool(
+            np.all((q_rad >= self.lower_rad) & (q_rad <= self.upper_rad))
+        ):
+            return []  # the usual case, without a Python loop
         outside = []
         for i, (q, lo, hi) in enumerate(zip(q_rad, self.lower_rad, self.upper_rad, strict=True)):
             if q < lo or q > hi:

@@ -26,7 +26,7 @@ FRUIT_SEMI_AXES_M = (0.035, 0.035, 0.04)  # an orange: d_h = 3.5 cm, d_v = 4 cm
 
 
 def harvest_target(
-    fruit_world_m: Sequence[float],
+    fruit_world_m: Sequence[float] | np.ndarray,
     *,
     fruit_id: int | None = None,
     stamp_ns: int = 0,
@@ -58,7 +58,9 @@ def harvest_target(
 
 
 def fruit(
-    i: int, center_m: Sequence[float], semi_axes_m: Sequence[float] = FRUIT_SEMI_AXES_M
+    i: int,
+    center_m: Sequence[float] | np.ndarray,
+    semi_axes_m: Sequence[float] | np.ndarray = FRUIT_SEMI_AXES_M,
 ) -> EllipsoidObstacle:
     return EllipsoidObstacle(
         name=f"fruit_{i}",
