@@ -49,8 +49,10 @@ def cycle_times(n_fruit: int, ticks: int, seed: int, settings: Any) -> dict[str,
     core = ControllerCore(settings)
     sim = KinematicSim()
     jcodec = TOPICS["robot/joint_state"].codec
-    field = fruit_field(n_fruit, rng, keep_clear_of=None) if n_fruit else []
-    targets = [fruit(i + 1, p) for i, p in enumerate(CYCLE_TARGETS)]
+    # n_fruit in all: the fruit of the targets (each ignored while it is the target) and the
+    # rest spread around; 0 leaves the trunk alone.
+    targets = [fruit(i + 1, p) for i, p in enumerate(CYCLE_TARGETS)][:n_fruit]
+    field = fruit_field(n_fruit - len(targets), rng) if n_fruit > len(targets) else []
     core.handle("scene/state", scene([*targets, *field], trunk_xy_m=TRUNK_XY_M))
     cycle, cpu, io, dist, solve, near, dampers = [], [], [], [], [], [], []
     per_target = max(1, ticks // len(CYCLE_TARGETS))

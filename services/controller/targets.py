@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from services.controller.geometry import AXIS_INDEX, exp3, norm, orientation_error, saturate
+from services.controller.geometry import exp3, norm, orientation_error, saturate
 
 
 @dataclass(frozen=True)
@@ -71,7 +71,3 @@ def step_target(
         norm(e_R),
     )
 
-
-def free_axis_in_parent(goal: PoseGoal) -> np.ndarray | None:
-    """The free rotation axis as a unit vector of the parent frame, or None."""
-    return None if goal.free_axis is None else goal.R[:, AXIS_INDEX[goal.free_axis]]
