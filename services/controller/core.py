@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -31,7 +32,7 @@ from services.controller.robot import ControlledRobot
 from services.controller.targets import Gains, StepTarget, step_target
 from services.controller.watchdog import Watchdog
 from services.robot.model import URDF_PATH
-from services.runtime import Output, Stamper
+from services.runtime import ConfigError, Output, Stamper
 
 NAME = "controller"
 
@@ -69,7 +70,10 @@ class ControllerCore:
 
     def __init__(self, settings: Settings) -> None:
         s = self.s = settings
-        self.robot = ControlledRobot(s.urdf_path or URDF_PATH)
+        urdf = Path(s.urdf_path) if s.urdf_path else URDF_PATH
+        if not urdf.is_file():
+            raise ConfigError(f"urdf_path {str(urdf)!r} is not a file")
+        self.robot = ControlledRobot(urdf)
         self.engine = DistanceEngine(self.robot, s.cull_distance_m)
         self.hqp = LexicographicHQP(
             self.robot,

@@ -70,4 +70,3 @@ def step_target(
         norm(e_p),
         norm(e_R),
     )
-

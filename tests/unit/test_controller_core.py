@@ -22,6 +22,7 @@ from services.controller import Settings
 from services.controller.core import ControllerCore
 from services.controller.kinsim import KinematicSim, SafetyMonitor
 from services.controller.scenarios import fruit, harvest_target, run_loop, scene
+from services.runtime import ConfigError
 from services.runtime.settings import load_settings
 
 SETTINGS = load_settings(Settings, {})
@@ -303,3 +304,8 @@ def test_a_trunk_cylinder_counts_as_trunk_in_the_status() -> None:
     d = res.statuses[0].min_distance_trunk_m
     assert d is not None and 0.0 < d < 0.25
     assert isinstance(trunk.obstacles.cylinders[0], CylinderObstacle)
+
+
+def test_a_missing_urdf_refuses_to_start() -> None:
+    with pytest.raises(ConfigError, match="urdf_path"):
+        ControllerCore(load_settings(Settings, {"urdf_path": "/nonexistent/robot.urdf"}))
