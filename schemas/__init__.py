@@ -3,7 +3,13 @@
 from schemas.base import ARM_ROLES, ArmRole, Frozen, Header, Message, Pose
 from schemas.camera import CameraIntrinsics, RgbdFrame, RgbdFrameMeta
 from schemas.codec import DecodeError
-from schemas.control import AbsoluteTarget, ControlStatus, PlanTarget, RelativeTarget
+from schemas.control import (
+    AbsoluteTarget,
+    ControllerDiagnostics,
+    ControlStatus,
+    PlanTarget,
+    RelativeTarget,
+)
 from schemas.harvest import FruitResult, HarvestEvent, RunSummary
 from schemas.perception import Detection, Detections, Track, Tracks
 from schemas.robot import (
@@ -34,6 +40,7 @@ __all__ = [
     "ArmRole",
     "CameraIntrinsics",
     "ControlStatus",
+    "ControllerDiagnostics",
     "CylinderObstacle",
     "DecodeError",
     "DemoAnswer",

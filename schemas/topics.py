@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from schemas.codec import Codec, JsonCodec, RgbdCodec
-from schemas.control import ControlStatus, PlanTarget
+from schemas.control import ControllerDiagnostics, ControlStatus, PlanTarget
 from schemas.harvest import HarvestEvent, RunSummary
 from schemas.perception import Detections, Tracks
 from schemas.robot import JointState, JointVelocityCommand, ToolCommand
@@ -17,19 +17,24 @@ from schemas.sim import GroundTruth, SimEvent
 
 @dataclass(frozen=True)
 class Topic:
-    """One topic of the graph: its key, codec and a line saying what flows on it."""
+    """One topic of the graph: its key, codec and a line saying what flows on it.
+
+    ``deterministic`` is False for wall-clock diagnostics (timings): their payloads differ from
+    run to run by design, so resim and the determinism checks report them as not compared.
+    """
 
     key: str
     codec: Codec[Any]
     description: str
+    deterministic: bool = True
 
     @property
     def schema_name(self) -> str:
         return self.codec.schema_name
 
 
-def _t(key: str, codec: Codec[Any], description: str) -> Topic:
-    return Topic(key, codec, description)
+def _t(key: str, codec: Codec[Any], description: str, deterministic: bool = True) -> Topic:
+    return Topic(key, codec, description, deterministic)
 
 
 TOPICS: dict[str, Topic] = {
@@ -44,6 +49,12 @@ TOPICS: dict[str, Topic] = {
         _t("scene/state", JsonCodec(SceneState), "Fruit list, trunk, obstacles, selection."),
         _t("plan/target", JsonCodec(PlanTarget), "Planner goal for both arms."),
         _t("control/status", JsonCodec(ControlStatus), "Controller errors, distances, flags."),
+        _t(
+            "diag/controller",
+            JsonCodec(ControllerDiagnostics),
+            "Controller timings and counters per tick (wall clock: not compared in resim).",
+            deterministic=False,
+        ),
         _t("harvest/events", JsonCodec(HarvestEvent), "Harvest state-machine events."),
         _t("harvest/summary", JsonCodec(RunSummary), "Run summary, once at the end."),
         _t("sim/truth", JsonCodec(GroundTruth), "Ground truth per camera frame (evaluation)."),

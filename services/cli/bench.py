@@ -1,4 +1,4 @@
-"""`harvest bench ...`: benchmarks (bus, viz, sim, detector, tracker; later controller, harvest)."""
+"""`harvest bench ...`: benchmarks (bus, viz, sim, controller, detector, tracker; later harvest)."""
 
 from __future__ import annotations
 
@@ -50,6 +50,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--no-tiny", action="store_true", help="skip the TinyRenderer comparison")
     s.add_argument("--json", action="store_true", help="print one JSON object")
     s.set_defaults(func=cmd_bench_sim)
+    c = bsub.add_parser(
+        "controller",
+        help="controller: cycle time vs fruit obstacles, closed-loop reach",
+        description="The controller core in closed loop with a kinematic sim: p50/p99 cycle "
+        "time with 0, 10, 50 and 200 fruit (message I/O apart), then reach success, time and "
+        "constraint violations on a fixed set of random targets the IK reaches.",
+    )
+    c.add_argument("--ticks", type=int, default=2000, help="control ticks per obstacle count")
+    c.add_argument("--targets", type=int, default=100, help="reach targets (0: skip reach)")
+    c.add_argument("--seed", type=int, default=6, help="seed of the scenes and the targets")
+    c.add_argument("--json", action="store_true", help="print one JSON object")
+    c.set_defaults(func=cmd_bench_controller)
     bench_perception.add_parsers(bsub)
 
 
@@ -78,5 +90,13 @@ def cmd_bench_sim(args: argparse.Namespace) -> int:
     from services.sim.bench import run_sim_bench, table
 
     result = run_sim_bench(args.scenario, args.seconds, tiny=not args.no_tiny)
+    print(json.dumps(result, indent=2) if args.json else table(result))
+    return 0
+
+
+def cmd_bench_controller(args: argparse.Namespace) -> int:
+    from services.controller.bench import run_controller_bench, table
+
+    result = run_controller_bench(args.ticks, args.targets, args.seed, progress=not args.json)
     print(json.dumps(result, indent=2) if args.json else table(result))
     return 0

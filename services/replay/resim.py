@@ -33,6 +33,12 @@ class TopicDiff:
     extra: int = 0
     after_end: int = 0  # produced past the last recorded seq (a truncated recording)
     first_difference_seq: int | None = None
+    compared: bool = True  # False for wall-clock diagnostics (Topic.deterministic is False)
+    not_compared: int = 0  # produced again but not compared (wall-clock diagnostics)
+
+    @property
+    def verdict(self) -> str:
+        return "compared" if self.compared else "not compared (wall-clock diagnostics)"
 
 
 @dataclass
@@ -44,13 +50,18 @@ class ResimReport:
     warnings: list[str] = field(default_factory=list)
 
     @property
+    def compared(self) -> list[TopicDiff]:
+        """The topics whose payloads must be identical (wall-clock diagnostics left out)."""
+        return [t for t in self.topics if t.compared]
+
+    @property
     def identical_ratio(self) -> float:
-        rec = sum(t.recorded for t in self.topics)
-        return sum(t.identical for t in self.topics) / rec if rec else 1.0
+        rec = sum(t.recorded for t in self.compared)
+        return sum(t.identical for t in self.compared) / rec if rec else 1.0
 
     @property
     def ok(self) -> bool:
-        return all(t.different == t.missing == t.extra == 0 for t in self.topics)
+        return all(t.different == t.missing == t.extra == 0 for t in self.compared)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -58,7 +69,7 @@ class ResimReport:
             "services": self.services,
             "identical_ratio": self.identical_ratio,
             "ok": self.ok,
-            "topics": [asdict(t) for t in self.topics],
+            "topics": [{**asdict(t), "verdict": t.verdict} for t in self.topics],
             "play": asdict(self.play),
             "warnings": self.warnings,
         }
@@ -216,6 +227,9 @@ def _wait_live(name: str, live: dict[str, bool], p: ManagedProcess, timeout_s: f
 
 
 def _diff(path: Path, outputs: list[str], collector: OutputCollector) -> list[TopicDiff]:
+    """Per output topic: recorded vs produced payloads by seq. Topics whose payloads carry wall
+    clock (``Topic.deterministic`` False) are counted but not compared: their differences are
+    expected, so they are reported as "not compared (wall-clock diagnostics)"."""
     from schemas.codec import DecodeError
     from schemas.topics import TOPICS
 
@@ -230,10 +244,12 @@ def _diff(path: Path, outputs: list[str], collector: OutputCollector) -> list[To
     out = []
     for t in outputs:
         rec, got = recorded[t], collector.produced[t].by_seq
-        d = TopicDiff(t, recorded=len(rec))
+        d = TopicDiff(t, recorded=len(rec), compared=TOPICS[t].deterministic)
         for seq, payload in sorted(rec.items()):
             if seq not in got:
                 d.missing += 1
+            elif not d.compared:
+                d.not_compared += 1
             elif got[seq] == payload:
                 d.identical += 1
             else:

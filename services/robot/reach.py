@@ -25,6 +25,12 @@ PEDUNCLE_ABOVE_M = 0.06  # cutter tip above the fruit centre (d_v + d_s)
 _FWD = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
 _BASKET_IN_CUTTER = rot_y(-math.pi / 2)  # basket z (dish normal) = cutter -x = up
 
+# The harvest-pose convention, public for the controller and its benchmark (same values).
+R_WORLD_CUTTER_FORWARD = _FWD
+"""Cutter orientation, level and pointing forward (world x), its x axis down."""
+R_CUTTER_BASKET = _BASKET_IN_CUTTER
+"""Collector (basket) orientation in the cutter frame: dish normal = cutter −x (up)."""
+
 
 @dataclass(frozen=True)
 class ReachResult:
@@ -127,6 +133,11 @@ class ReachSolver:
 
 def _basket_offset() -> np.ndarray:
     return np.array([BASKET_BELOW_M, 0.0, 0.0])  # cutter x points down
+
+
+def basket_offset_cutter_m() -> np.ndarray:
+    """Collector (dish centre) position in the cutter frame, m: BASKET_BELOW_M under the tip."""
+    return _basket_offset()
 
 
 def _T(R: np.ndarray, p: np.ndarray) -> np.ndarray:

@@ -1,7 +1,7 @@
 """Service runtime: specs, settings, the Node around a pure core, lock-step and the entry point."""
 
 from services.runtime.lockstep import AnswerBarrier, LockstepPlan, LockstepStall
-from services.runtime.node import Core, Mode, Node, Output, SourceCore
+from services.runtime.node import Core, Mode, Node, Output, SourceCore, TimedCore
 from services.runtime.service import ConfigError, ServiceDef, run_service
 from services.runtime.settings import ServiceSettings, SettingsError, config_hash, load_settings
 from services.runtime.spec import NodeSpec, answer_closure
@@ -22,6 +22,7 @@ __all__ = [
     "SettingsError",
     "SourceCore",
     "Stamper",
+    "TimedCore",
     "answer_closure",
     "config_hash",
     "load_settings",

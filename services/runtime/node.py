@@ -33,6 +33,29 @@ class Core(Protocol):
     def handle(self, topic: str, msg: Any) -> Sequence[Output]: ...
 
 
+class TimedCore(Core, Protocol):
+    """A reactive core that also wants to act when no input comes (live mode only).
+
+    The Node calls ``on_timer(wall_ns)`` about every ``timer_period_s`` on the same worker
+    thread as ``handle`` (so no locking is needed) and publishes what it returns. Never in
+    lock-step: there, time is the stamps and nothing may happen between inputs. Use: a
+    controller's watchdog that must stop the arms when its inputs stop arriving.
+    """
+
+    timer_period_s: float
+
+    def on_timer(self, wall_ns: int) -> Sequence[Output]: ...
+
+
+def timer_of(core: Any, mode: Mode) -> tuple[Any, float] | None:
+    """The core's ``(on_timer, period_s)`` when it has a timer and the mode is live, else None."""
+    fn = getattr(core, "on_timer", None)
+    period_s = float(getattr(core, "timer_period_s", 0.0) or 0.0)
+    if mode != "live" or fn is None or period_s <= 0:
+        return None
+    return fn, period_s
+
+
 class SourceCore(Protocol):
     """A clock-master core: emits the messages of a tick, takes answers, advances time."""
 
@@ -192,12 +215,32 @@ class Node:
 
     # ---- loops -----------------------------------------------------------------------------
     def run_reactive(self, core: Core) -> None:
-        """Hand every input to the core in arrival order until stopped."""
+        """Hand every input to the core in arrival order until stopped; in live mode also call
+        the core's timer (``TimedCore``) when it is due, between inputs."""
+        timer = timer_of(core, self.mode)
+        next_due = time.monotonic() + (timer[1] if timer else 0.0)
         self._core = core
         while not self.stop_event.is_set():
-            item = self.next_input(timeout_s=0.2)
+            wait_s = 0.2 if timer is None else min(0.2, max(0.0, next_due - time.monotonic()))
+            item = self.next_input(timeout_s=wait_s)
             if item is not None:
                 self.publish(self.call(core.handle, *item))
+            if timer is not None and time.monotonic() >= next_due:
+                fn, period_s = timer
+                # Fixed phase, but never a burst of catch-up calls after a long input.
+                next_due = max(next_due + period_s, time.monotonic())
+                self.publish(self._call_timer(fn))
+
+    def _call_timer(self, fn: Any) -> Sequence[Output]:
+        """Run the core's timer; an exception is counted and logged once, never fatal."""
+        try:
+            return fn(time.monotonic_ns())
+        except Exception:
+            self.errors += 1
+            if "timer" not in self._error_log:
+                self._error_log.add("timer")
+                log.exception("core timer failed (counted; later failures are not logged)")
+            return ()
 
     def run_source(self, core: SourceCore, speed: float = 1.0) -> None:
         """Clock-master loop: emit a tick's groups, wait for their answers, feed inputs, advance.

@@ -113,12 +113,15 @@ def test_headless_screenshot_renders_the_blueprint(tmp_path: Path) -> None:
 
     png = tmp_path / "shot.png"
     out = tmp_path / "x.rrd"
-    size = "1234x777"  # marks this test's viewer among the machine's processes
+    # The size marks this test's viewer among the machine's processes (unique per test process:
+    # another suite may run this test at the same time).
+    width = 1234 + os.getpid() % 97
+    size = f"{width}x777"
     args = ("--out", str(out), "--screenshot", str(png), "--window-size", size)
     r = harvest("view", str(fx.PATH), *args, timeout=180)
     assert r.returncode == 0, r.stdout + r.stderr
     image = cv2.imread(str(png))
-    assert image is not None and image.shape[0] >= 777 and image.shape[1] >= 1234
+    assert image is not None and image.shape[0] >= 777 and image.shape[1] >= width
     assert image.std() > 20  # drawn views, not a blank window
     assert not _processes_with(f"--window-size {size}")  # the viewer and its launcher are gone
 

@@ -1,0 +1,143 @@
+"""The hierarchy: inequalities > absolute task > relative task, as two sequential placo QPs.
+
+Paper §IV-A, eq. (6). Solve 1 minimises the absolute task's residual under every inequality
+(joint position and velocity limits, velocity dampers) → Δq₁. Solve 2 minimises the relative
+task's residual under the same inequalities *and* ``A₁ Δq = A₁ Δq₁`` (the absolute task's rows,
+held through a pair of half-spaces each, ±1e-7), so the relative task can only use what the
+absolute task leaves free: a true lexicographic order, never a weighted blend. Δq₁ satisfies
+solve 2's constraints, so solve 2 is feasible whenever solve 1 is (up to round-off).
+
+Fallbacks (documented in the README): if solve 1 is infeasible, the dampers are made soft
+(slack, weight ``soft_damper_weight``) and both solves retried → ``softened``; if that fails
+too → ``stopped`` (no Δq). If solve 2 alone fails, Δq₁ is sent → ``absolute_only``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from schemas.control import Fallback
+from services.controller.dampers import DamperRows
+from services.controller.robot import N_FBASE_Q, N_FBASE_V, ControlledRobot
+from services.controller.targets import StepTarget
+
+HOLD_EPS = 1e-7  # slack of the held absolute rows, m or rad per step
+
+
+@dataclass(frozen=True)
+class Weights:
+    """Task weights (dimensionless: errors are per-step, in m and rad) and regularisations."""
+
+    abs_position: float = 1.0
+    abs_orientation: float = 1.0
+    rel_position: float = 1.0
+    rel_orientation: float = 1.0
+    regularization_abs: float = 1e-6
+    regularization_rel: float = 1e-4
+    soft_damper: float = 1e4
+
+
+@dataclass(frozen=True)
+class HqpResult:
+    """The joint step (nv, rad) or None when stopped; which fallback; why, when one was used."""
+
+    dq: np.ndarray | None
+    fallback: Fallback
+    reason: str = ""
+
+
+class LexicographicHQP:
+    """Two placo KinematicsSolvers on one robot, sharing the damper rows."""
+
+    def __init__(self, robot: ControlledRobot, weights: Weights, dt_s: float) -> None:
+        import placo
+
+        self.robot = robot
+        self.w = weights
+        cut, col = robot.tool_frame["cutter"], robot.tool_frame["collector"]
+        nq = robot.model.nq
+        self.s1 = self._solver(placo, dt_s)
+        self.abs_pos = self.s1.add_position_task(cut, np.zeros(3))
+        self.abs_pos.configure("abs_position", "soft", weights.abs_position)
+        self.abs_ori = self.s1.add_orientation_task(cut, np.eye(3))
+        self.abs_ori.configure("abs_orientation", "soft", weights.abs_orientation)
+        self.s1.add_regularization_task(weights.regularization_abs)
+        self.damp1 = self.s1.add_joint_space_half_spaces_constraint(np.zeros((1, nq)), np.ones(1))
+
+        self.s2 = self._solver(placo, dt_s)
+        self.rel_pos = self.s2.add_relative_position_task(cut, col, np.zeros(3))
+        self.rel_pos.configure("rel_position", "soft", weights.rel_position)
+        self.rel_ori = self.s2.add_relative_orientation_task(cut, col, np.eye(3))
+        self.rel_ori.configure("rel_orientation", "soft", weights.rel_orientation)
+        self.s2.add_regularization_task(weights.regularization_rel)
+        self.damp2 = self.s2.add_joint_space_half_spaces_constraint(np.zeros((1, nq)), np.ones(1))
+        self.hold = self.s2.add_joint_space_half_spaces_constraint(np.zeros((1, nq)), np.ones(1))
+        self.hold.configure("hold_absolute", "hard", 1.0)
+
+    def _solver(self, placo: Any, dt_s: float) -> Any:
+        """A solver with the torso fixed and the URDF's position and velocity limits."""
+        s = placo.KinematicsSolver(self.robot.robot)
+        s.mask_fbase(True)  # placo always adds a floating base; the torso does not move
+        s.dt = dt_s  # required before velocity limits: |Δq| ≤ dt · v_max
+        s.enable_joint_limits(True)  # lower ≤ q + Δq ≤ upper
+        s.enable_velocity_limits(True)
+        return s
+
+    def solve(
+        self, abs_step: StepTarget, rel_step: StepTarget, rows: DamperRows, dt_s: float
+    ) -> HqpResult:
+        """Δq for this tick (robot state already set), or the documented fallback."""
+        for s in (self.s1, self.s2):
+            s.dt = dt_s
+        self.abs_pos.target_world = abs_step.p_step_m
+        self.abs_ori.R_world_frame = abs_step.R_step
+        self.abs_ori.mask.set_axises(abs_step.mask_axes, "local")  # local = the target frame
+        self.rel_pos.target = rel_step.p_step_m  # expressed in the cutter frame (placo: frame a)
+        self.rel_ori.R_a_b = rel_step.R_step
+        # Relative orientation errors are in the cutter frame; the free axis is one of the
+        # collector goal frame, so project on that frame's axes (custom = R_step^T).
+        self.rel_ori.mask.R_custom_world = rel_step.R_step.T
+        self.rel_ori.mask.set_axises(rel_step.mask_axes, "custom")
+        for c in (self.damp1, self.damp2):
+            c.A, c.b = rows.A, rows.b
+        fallback: Fallback = "none"
+        reason = ""
+        self._dampers("hard")
+        try:
+            dq1 = np.array(self.s1.solve(False))
+        except RuntimeError as exc:
+            self._dampers("soft")
+            try:
+                dq1 = np.array(self.s1.solve(False))
+            except RuntimeError as exc2:
+                return HqpResult(None, "stopped", f"QP infeasible even with soft dampers: {exc2}")
+            fallback, reason = "softened", f"dampers softened ({_short(exc)})"
+        self._hold_absolute(dq1)
+        try:
+            dq2 = np.array(self.s2.solve(False))
+        except RuntimeError as exc:
+            return HqpResult(dq1, "absolute_only", f"relative QP failed ({_short(exc)})")
+        return HqpResult(dq2, fallback, reason)
+
+    def _dampers(self, priority: str) -> None:
+        for i, c in enumerate((self.damp1, self.damp2)):
+            c.configure(f"dampers{i + 1}", priority, self.w.soft_damper)
+
+    def _hold_absolute(self, dq1: np.ndarray) -> None:
+        """Solve 2 keeps A₁ Δq = A₁ Δq₁ (± HOLD_EPS) through 2 half-spaces per absolute row."""
+        A1 = np.vstack([self.abs_pos.A, self.abs_ori.A])[:, N_FBASE_V:]
+        y = A1 @ dq1[N_FBASE_V:]
+        m = len(A1)
+        H = np.zeros((2 * m, self.robot.model.nq))
+        H[:m, N_FBASE_Q:] = A1
+        H[m:, N_FBASE_Q:] = -A1
+        qa = self.robot.q_full[N_FBASE_Q:]
+        self.hold.A = H
+        self.hold.b = np.concatenate([A1 @ qa + y + HOLD_EPS, -(A1 @ qa) - y + HOLD_EPS])
+
+
+def _short(exc: Exception) -> str:
+    return str(exc).splitlines()[0][:120] if str(exc) else type(exc).__name__
