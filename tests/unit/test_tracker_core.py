@@ -111,3 +111,21 @@ def test_a_frame_of_another_size_is_not_used_for_appearance() -> None:
     c.handle("camera/rgbd", small)
     out = run(c, f, dets_for(f, truth_boxes(scene, 0)), send_frame=False)
     assert len(out.tracks) == 2 and c.counters["frame_size_mismatch"] == 1
+
+
+def test_detections_with_nan_or_inverted_boxes_never_reach_the_core() -> None:
+    """The bus decodes with the schema: such payloads are rejected (and counted) there."""
+    import pytest
+
+    from schemas.codec import DecodeError
+    from schemas.topics import TOPICS
+
+    scene = Scene2D(seed=1, n_fruit=1, sweep=None)
+    good = dets_for(scene.frame(0).frame, truth_boxes(scene, 0))
+    codec = TOPICS["perception/detections"].codec
+    payload = codec.encode(good).decode()
+    box = ",".join(str(v) for v in good.detections[0].xyxy_px)
+    assert box in payload
+    for bad in ("NaN,1.0,2.0,3.0", "50.0,50.0,10.0,10.0"):
+        with pytest.raises(DecodeError):
+            codec.decode(payload.replace(box, bad).encode())
