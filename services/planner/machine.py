@@ -1,0 +1,426 @@
+"""The harvest state machine (paper §IV-B, §IV-C): one step per control status.
+
+    idle ──(startup)──▶ select ──▶ approach ──▶ harvest ──▶ cut ──▶ leave ──▶ select …
+                          │            │            │         │  └─(cut failed, retry)─▶ harvest
+                          ▼            └─ lost / stuck: skip ─┘
+                         home ──(nothing left for finish_after_s)──▶ done
+
+* **select**: the next fruit by the order policy among the candidates; a fruit whose harvest
+  pose or pre-pose the IK cannot reach is skipped as unreachable right there.
+* **approach**: the cutter to the pre-pose (d_z in front along the optical axis); the target
+  fruit is an obstacle. Lost (unseen too long) → back to select; stuck or timed out → skipped
+  as unreachable.
+* **harvest**: the cutter tip to the peduncle, the dish under the fruit; the fruit may be
+  touched (``ignore_fruit_ids``). Stuck or timed out → unreachable, leave.
+* **cut**: one tool command, then wait for the basket's fruit count to go up (collected).
+  After ``collect_timeout_s``: the fruit still seen on its branch → the cut failed: retry
+  (harvest again) up to ``max_cut_attempts``, then give up (cut_failed); gone → dropped.
+* **leave**: back to the pre-pose of that fruit, then select.
+* **home**: nothing to do: the ready pose; the run ends after ``finish_after_s`` there with no
+  candidate (or at ``max_run_s``).
+
+Progress: each phase keeps the best task error seen on statuses of its own targets; no
+improvement by ``progress_min_m`` for ``no_progress_s`` is "stuck". Statuses of older targets
+(the first tick after a switch) and holding statuses do not count as progress.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from schemas.control import ControlStatus, HarvestPhase
+from schemas.harvest import FruitOutcome, HarvestEventKind
+from services.planner import Settings
+from services.planner.book import FruitBook, FruitRecord
+from services.planner.kinematics import Kinematics
+from services.planner.order import nearest_first, planned_order
+from services.planner.poses import PoseSettings, ToolPoses, harvest_pose, pre_pose
+
+NS = 1_000_000_000
+
+
+@dataclass(frozen=True)
+class Event:
+    """A harvest event before it becomes a message."""
+
+    event: HarvestEventKind
+    fruit_id: int | None = None
+    phase_from: str = ""
+    phase_to: str = ""
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class Goal:
+    """What to send this tick: the phase, the poses (None: hold), the fruit, ignored IDs."""
+
+    phase: HarvestPhase
+    poses: ToolPoses | None
+    fruit_id: int | None = None
+    ignore: tuple[int, ...] = ()
+
+
+@dataclass
+class CutState:
+    """One cut: when, the basket count before it, where the fruit was."""
+
+    stamp_ns: int
+    basket_before: int
+    centre_world_m: np.ndarray
+
+
+@dataclass
+class Progress:
+    """Best task error of the current phase and when it last improved."""
+
+    since_ns: int
+    first_target_seq: int
+    best_m: float = float("inf")
+    best_ns: int = 0
+
+    def note(self, st: ControlStatus, now_ns: int, min_gain_m: float) -> None:
+        if st.target_seq is None or st.target_seq < self.first_target_seq or st.reason:
+            return
+        err = st.abs_position_error_m + st.rel_position_error_m
+        if err < self.best_m - min_gain_m:
+            self.best_m, self.best_ns = err, now_ns
+
+    def stuck(self, now_ns: int, after_s: float) -> bool:
+        ref = self.best_ns if self.best_m < float("inf") else self.since_ns
+        return now_ns - ref > after_s * NS
+
+
+@dataclass
+class Machine:
+    """Phases and transitions; the book and the kinematics are shared with the core."""
+
+    s: Settings
+    book: FruitBook
+    kin: Kinematics
+    pose_settings: PoseSettings
+    phase: HarvestPhase = "idle"
+    target: FruitRecord | None = None
+    progress: Progress = field(default_factory=lambda: Progress(0, 0))
+    cut: CutState | None = None
+    home_since_ns: int | None = None
+    last_tip_world_m: np.ndarray | None = None
+    events: list[Event] = field(default_factory=list)
+    tools: list[tuple[str, int | None]] = field(default_factory=list)  # (action, fruit_id)
+    finished: bool = False
+    started: bool = False
+    next_seq: int = 0
+
+    # ---- one tick ----------------------------------------------------------------------------
+    def step(self, now_ns: int, st: ControlStatus, next_seq: int, basket: int | None) -> Goal:
+        """Advance on one control status; ``next_seq`` is the seq the returned goal will carry;
+        ``basket`` the latest fruit count of the load cell (None: no reading yet)."""
+        self.next_seq = next_seq
+        if not self.started:
+            self.started = True
+            self.events.append(Event("run_started", phase_to="idle"))
+        self.progress.note(st, now_ns, self.s.progress_min_m)
+        self._note_switches_and_moves()
+        if self.phase != "done" and now_ns >= self.s.max_run_s * NS:
+            self._end_run(now_ns, f"run time limit {self.s.max_run_s:.0f} s")
+        handler = {
+            "idle": self._idle,
+            "approach": self._approach,
+            "harvest": self._harvest,
+            "cut": self._cut,
+            "leave": self._leave,
+            "home": self._home,
+            "done": lambda now, st, basket: None,
+        }[self.phase]
+        handler(now_ns, st, basket)
+        return self.goal()
+
+    def goal(self) -> Goal:
+        rec = self.target
+        if self.phase in ("idle", "home", "done") or rec is None:
+            return Goal(self.phase, self._ready(), ignore=self.book.ignore_ids(None))
+        poses = pre_pose if self.phase in ("approach", "leave") else harvest_pose
+        touching = self.phase in ("harvest", "cut", "leave")
+        return Goal(
+            self.phase,
+            poses(rec.planned, self.pose_settings),
+            rec.fruit_id,
+            self.book.ignore_ids(rec if touching else None),
+        )
+
+    # ---- phases ------------------------------------------------------------------------------
+    def _idle(self, now: int, st: ControlStatus, basket: int | None) -> None:
+        if now >= self.s.startup_s * NS:
+            self._select(now)
+
+    def _approach(self, now: int, st: ControlStatus, basket: int | None) -> None:
+        rec = self.target
+        assert rec is not None
+        if not rec.in_scene:
+            rec.losses += 1
+            why = f"left the scene during the approach (last seen {rec.seen.frames_unseen} "
+            why += "frames before)"
+            if rec.losses >= self.s.max_losses:
+                self._finish(rec, now, "lost", f"{why}, {rec.losses} times", cycle_done=True)
+                self.events.append(Event("fruit_lost", rec.fruit_id, reason=why))
+            else:
+                self.events.append(Event("fruit_lost", rec.fruit_id, reason=f"{why}; may retry"))
+                rec.started_ns = None
+            self.target = None
+            self._select(now)
+            return
+        if self._reached(st, self.s.approach_tolerance_m):
+            self._enter("harvest", now)
+            return
+        self._check_stuck(now, self.s.approach_timeout_s, leave=False)
+
+    def _harvest(self, now: int, st: ControlStatus, basket: int | None) -> None:
+        rec = self.target
+        assert rec is not None
+        if self._reached(st, self.s.harvest_tolerance_m):
+            rec.cuts += 1
+            rec.frozen = True  # the estimate of a falling fruit must not move the target
+            self.cut = CutState(
+                now, basket if basket is not None else 0, rec.planned.centre_world_m.copy()
+            )
+            self.tools.append(("cut", rec.fruit_id))
+            self.events.append(
+                Event("cut_sent", rec.fruit_id, reason=f"cut {rec.cuts}/{self.s.max_cut_attempts}")
+            )
+            self._enter("cut", now)
+            return
+        self._check_stuck(now, self.s.harvest_timeout_s, leave=True)
+
+    def _cut(self, now: int, st: ControlStatus, basket: int | None) -> None:
+        rec, cut = self.target, self.cut
+        assert rec is not None and cut is not None
+        if basket is not None and basket > cut.basket_before:
+            self.events.append(Event("fruit_collected", rec.fruit_id, reason="basket count up"))
+            self._finish(rec, now, "harvested", "")
+            self._open_and_leave(now)
+            return
+        if now - cut.stamp_ns < self.s.collect_timeout_s * NS:
+            return
+        if self._still_attached(rec, cut):
+            if rec.cuts < self.s.max_cut_attempts:
+                self.events.append(
+                    Event(
+                        "replanned",
+                        rec.fruit_id,
+                        reason=f"cut {rec.cuts} failed (fruit still on its branch): retrying",
+                    )
+                )
+                self.tools.append(("open", rec.fruit_id))
+                rec.frozen = False  # re-aim at the fruit as it is seen now
+                self._enter("harvest", now)
+                return
+            why = f"cut failed {rec.cuts} times (fruit still on its branch)"
+            self.events.append(Event("fruit_skipped", rec.fruit_id, reason=why))
+            self._finish(rec, now, "cut_failed", why)
+        else:
+            why = f"not in the basket {self.s.collect_timeout_s:.1f} s after the cut, gone from "
+            why += "its branch"
+            self.events.append(Event("fruit_dropped", rec.fruit_id, reason=why))
+            self._finish(rec, now, "dropped", why)
+        self._open_and_leave(now)
+
+    def _leave(self, now: int, st: ControlStatus, basket: int | None) -> None:
+        reached = self._reached(st, self.s.leave_tolerance_m, loose=True)
+        if reached or now - self.progress.since_ns > self.s.leave_timeout_s * NS:
+            rec = self.target
+            if rec is not None and rec.finished_ns is None:
+                rec.finished_ns = now
+            self.target = None
+            self._select(now)
+
+    def _home(self, now: int, st: ControlStatus, basket: int | None) -> None:
+        if self._candidates():
+            self._select(now)
+            return
+        at_home = self._reached(st, self.s.home_tolerance_m, loose=True)
+        timed_out = now - self.progress.since_ns > self.s.home_timeout_s * NS
+        if (at_home or timed_out) and self.home_since_ns is None:
+            self.home_since_ns = now
+        if (
+            self.home_since_ns is not None
+            and now - self.home_since_ns >= self.s.finish_after_s * NS
+        ):
+            self._end_run(now, "no reachable fruit left")
+
+    # ---- selection ---------------------------------------------------------------------------
+    def _candidates(self) -> list[FruitRecord]:
+        return self.book.candidates(self.s.lost_after_frames)
+
+    def _select(self, now: int) -> None:
+        """The next fruit by the policy; unreachable ones are skipped with the IK's reason."""
+        while True:
+            cands = self._candidates()
+            if not cands:
+                self._go_home(now)
+                return
+            if self.s.order == "planned":
+                for r in cands:
+                    self._check_reach(r, now)
+                cands = [r for r in cands if not r.finished]
+                if not cands:
+                    continue
+                rec, why = self._planned_first(cands)
+            else:
+                i = nearest_first([r.seen.distance_m for r in cands])[0]
+                rec = cands[i]
+                why = f"nearest ({rec.seen.distance_m:.3f} m from the camera)"
+                if not self._check_reach(rec, now):
+                    continue
+            break
+        self.target = rec
+        if rec.started_ns is None:
+            rec.started_ns = now
+        self.events.append(Event("fruit_selected", rec.fruit_id, reason=why))
+        self._enter("approach", now)
+
+    def _planned_first(self, cands: list[FruitRecord]) -> tuple[FruitRecord, str]:
+        pts = np.array([pre_pose(r.planned, self.pose_settings).tip_world_m for r in cands])
+        start = self.last_tip_world_m if self.last_tip_world_m is not None else self._ready_tip()
+        order = planned_order(start, pts, self._ready_tip(), self.s.planned_exact_max)
+        rec = cands[order[0]]
+        return rec, f"planned order ({len(cands)} fruit): " + " → ".join(
+            str(cands[i].fruit_id) for i in order
+        )
+
+    def _check_reach(self, rec: FruitRecord, now: int) -> bool:
+        """IK of the harvest pose and the pre-pose (cached); unreachable: skipped now."""
+        if rec.reach is None:
+            h = harvest_pose(rec.planned, self.pose_settings)
+            p = pre_pose(rec.planned, self.pose_settings)
+            rec.reach = (
+                self.kin.reach(h.tip_world_m, h.basket_below_m),
+                self.kin.reach(p.tip_world_m, p.basket_below_m),
+            )
+        hv, pv = rec.reach
+        if hv.reachable and pv.reachable:
+            return True
+        which = "harvest pose" if not hv.reachable else "pre-pose"
+        bad = hv if not hv.reachable else pv
+        why = f"unreachable: {which} out of reach ({bad.why()})"
+        self.events.append(Event("fruit_skipped", rec.fruit_id, reason=why))
+        self._finish(rec, now, "unreachable", why, cycle_done=True)
+        return False
+
+    # ---- helpers -----------------------------------------------------------------------------
+    def _enter(self, phase: HarvestPhase, now: int) -> None:
+        rec = self.target
+        self.events.append(
+            Event(
+                "phase_changed",
+                rec.fruit_id if rec is not None else None,
+                self.phase,
+                phase,
+            )
+        )
+        self.phase = phase
+        self.progress = Progress(now, self.next_seq)
+        goal = self.goal()
+        if goal.poses is not None:
+            self.last_tip_world_m = goal.poses.tip_world_m
+
+    def _go_home(self, now: int) -> None:
+        if self.phase != "home":
+            self.home_since_ns = None
+            self.target = None
+            self._enter("home", now)
+
+    def _open_and_leave(self, now: int) -> None:
+        rec = self.target
+        self.tools.append(("open", rec.fruit_id if rec is not None else None))
+        self.cut = None
+        self._enter("leave", now)
+
+    def _finish(
+        self,
+        rec: FruitRecord,
+        now: int,
+        outcome: FruitOutcome,
+        reason: str,
+        cycle_done: bool = False,
+    ) -> None:
+        """Record the outcome. The fruit's cycle ends now (``cycle_done``) or, when the tools
+        must still back out, once they are at the pre-pose (``_leave``)."""
+        rec.outcome, rec.reason = outcome, reason
+        if cycle_done:
+            rec.finished_ns = now
+
+    def _end_run(self, now: int, why: str) -> None:
+        rec = self.target
+        if rec is not None and not rec.finished:
+            rec.outcome, rec.reason = "pending", why
+        for r in self.book.detected():
+            if r.finished_ns is None and r.finished:
+                r.finished_ns = now
+        self.target = None
+        self.events.append(Event("phase_changed", None, self.phase, "done", why))
+        self.events.append(Event("run_finished", reason=why))
+        self.phase = "done"
+        self.finished = True
+
+    def _check_stuck(self, now: int, timeout_s: float, leave: bool) -> None:
+        rec = self.target
+        assert rec is not None
+        over = now - self.progress.since_ns > timeout_s * NS
+        stuck = self.progress.stuck(now, self.s.no_progress_s)
+        if not (over or stuck):
+            return
+        err = self.progress.best_m
+        what = f"timed out after {timeout_s:.1f} s" if over else "no progress"
+        why = f"unreachable: {self.phase} {what} (best task error {err * 1e3:.0f} mm)"
+        self.events.append(Event("fruit_skipped", rec.fruit_id, reason=why))
+        self._finish(rec, now, "unreachable", why, cycle_done=not leave)
+        if leave:
+            rec.frozen = True
+            self._enter("leave", now)
+        else:
+            self.target = None
+            self._select(now)
+
+    def _reached(self, st: ControlStatus, tol_m: float, loose: bool = False) -> bool:
+        """The status is of this phase's targets, not holding, and within tolerance."""
+        if st.target_seq is None or st.target_seq < self.progress.first_target_seq or st.reason:
+            return False
+        if st.abs_position_error_m > tol_m:
+            return False
+        if loose:
+            return True
+        return (
+            st.rel_position_error_m <= self.s.relative_tolerance_m
+            and st.abs_orientation_error_rad <= self.s.orientation_tolerance_rad
+            and st.rel_orientation_error_rad <= self.s.orientation_tolerance_rad
+        )
+
+    def _still_attached(self, rec: FruitRecord, cut: CutState) -> bool:
+        """Seen after the cut (once a cut fruit would have fallen) where it was cut."""
+        f = rec.seen
+        if not rec.in_scene or f.last_seen_stamp_ns < cut.stamp_ns + self.s.seen_after_cut_s * NS:
+            return False
+        p = np.array(f.position_world_m, float)
+        return bool(np.linalg.norm(p - cut.centre_world_m) <= self.s.attached_tolerance_m)
+
+    def _note_switches_and_moves(self) -> None:
+        rec = self.target
+        for key, old, new in self.book.switches:
+            if rec is not None and key == rec.key:
+                self.events.append(
+                    Event("replanned", new, reason=f"track ID switch {old} → {new}: same fruit")
+                )
+        for key, d in self.book.moved:
+            if rec is not None and key == rec.key and self.phase in ("approach", "harvest"):
+                self.events.append(
+                    Event("replanned", rec.fruit_id, reason=f"fruit moved {d * 100:.1f} cm")
+                )
+        self.book.switches.clear()
+        self.book.moved.clear()
+
+    def _ready_tip(self) -> np.ndarray:
+        return self.kin.ready_tip_world_m
+
+    def _ready(self) -> ToolPoses:
+        return ToolPoses(self.kin.ready_tip_world_m, self.kin.ready_basket_below_m)
