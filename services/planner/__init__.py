@@ -59,6 +59,14 @@ class Settings(ServiceSettings):
         "front of the fruit its rim would otherwise pass within the fruit damper's safety "
         "distance of the fruit's underside (the target is an obstacle until the harvest phase).",
     )
+    ready_pose: Literal["home", "low"] = Field(
+        default="low",
+        description="The pose at the start, while nothing is to be done and at the end: 'home' "
+        "(the tool pose of the sim's initial posture HOME_RAD: the arms cover ~34 % of the "
+        "image, most of its lower-left quarter) or 'low' (cutter tip at (0.55, 0.15, 0.80) m "
+        "pitched 30° down and turned 90° left, the dish 0.14 m under it: ~7 %, found by a "
+        "search over tool poses, every joint ≥ 17° inside its limits; README).",
+    )
     # --- when a phase is done ---------------------------------------------------------------
     approach_tolerance_m: float = Field(
         default=0.02, gt=0, description="Pre-pose reached: cutter position error below, m."
@@ -96,6 +104,13 @@ class Settings(ServiceSettings):
         ge=0,
         description="A sighting counts as 'still on its branch' only this long after the cut "
         "(a cut fruit falls ~5 cm in 0.1 s).",
+    )
+    verify_s: float = Field(
+        default=1.0,
+        gt=0,
+        description="A cut not confirmed by the basket, with the fruit not seen since (the tools "
+        "hide it): the tools back out to the ready pose and look this long; seen on its branch → "
+        "the cut failed (retry), not seen → dropped, s.",
     )
     max_cut_attempts: int = Field(
         default=2, ge=1, le=5, description="Cuts per fruit (the issue: retry once)."

@@ -149,11 +149,13 @@ class FruitBook:
         return [r for _, r in sorted(self.records.items()) if not r.in_basket]
 
 
-def inside_dish(p_world_m: np.ndarray, dish: DishPose, d_v_m: float, margin_m: float) -> bool:
-    """A fruit centre inside the dish's cylinder: within the radius, from the floor to the rim
-    plus a fruit height (a fruit resting in the dish sticks out of it)."""
+def inside_dish(p_world_m: np.ndarray, dish: DishPose, margin_m: float) -> bool:
+    """A fruit centre inside the dish: within its radius, between the floor and the rim top
+    (+ margin). A fruit resting in the dish has its centre d_v (≤ 5 cm) above the floor; the
+    fruit hanging over the dish at the harvest pose has it rim + clearance + d_v (≥ 8.5 cm)
+    above, so the target is never taken for a fruit in the basket."""
     rel = np.asarray(p_world_m, float) - dish.centre_world_m
     h = float(rel @ dish.normal_world)
     radial = float(np.linalg.norm(rel - h * dish.normal_world))
-    top = TOOLS.basket_rim_height_m + 2 * d_v_m + margin_m
+    top = TOOLS.basket_rim_height_m + margin_m
     return radial <= TOOLS.basket_radius_m + margin_m and -margin_m <= h <= top

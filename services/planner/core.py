@@ -33,7 +33,9 @@ class PlannerCore:
 
     def __init__(self, settings: Settings) -> None:
         s = self.s = settings
-        self.kin = Kinematics(s.reach_yaws_deg, s.reach_iterations, s.reach_tolerance_m)
+        self.kin = Kinematics(
+            s.reach_yaws_deg, s.reach_iterations, s.reach_tolerance_m, s.ready_pose
+        )
         self.book = FruitBook(s.same_fruit_m, s.replan_distance_m)
         self.machine = Machine(
             s,
@@ -99,8 +101,7 @@ class PlannerCore:
         dish = self.book.dish_at.get(f.last_seen_stamp_ns)
         if dish is None:
             return False
-        p = np.array(f.position_world_m, float)
-        return inside_dish(p, dish, f.semi_axis_v_m, IN_DISH_MARGIN_M)
+        return inside_dish(np.array(f.position_world_m, float), dish, IN_DISH_MARGIN_M)
 
     def _refuse(self, topic: str, why: str) -> None:
         n = self.refused.get(topic, 0)

@@ -16,9 +16,28 @@ import numpy as np
 from schemas.base import ARM_ROLES, ArmRole
 from schemas.robot import JointState
 from services.robot.model import CAMERA_FRAME, HOME_RAD, TOOL_FRAME, URDF_PATH, joint_names
-from services.robot.reach import ReachSolver
+from services.robot.reach import R_WORLD_CUTTER_FORWARD, ReachSolver
 
 BASKET_FRAME = TOOL_FRAME["collector"]
+
+# The 'low' ready pose (README): arms mostly below the camera's view. Found by IK from
+# HOME_RAD over tool positions, pitches and yaws, scoring the robot's share of the rendered
+# image with every joint ≥ 8° inside its limits: 7 % of the image (HOME_RAD: 34 %).
+LOW_READY_TIP_WORLD_M = (0.55, 0.15, 0.80)
+LOW_READY_BASKET_BELOW_M = 0.14
+LOW_READY_PITCH_DOWN_DEG = 30.0
+LOW_READY_YAW_LEFT_DEG = 90.0
+
+
+def low_ready_rotation() -> np.ndarray:
+    """The cutter pointing forward, pitched down, then turned left about the vertical."""
+    from services.robot.urdf import rot_y, rot_z
+
+    return (
+        rot_z(math.radians(LOW_READY_YAW_LEFT_DEG))
+        @ rot_y(math.radians(LOW_READY_PITCH_DOWN_DEG))
+        @ R_WORLD_CUTTER_FORWARD
+    )
 
 
 @dataclass(frozen=True)
@@ -49,7 +68,12 @@ class Kinematics:
     """FK for the dish and the ready pose; cached IK for reachability."""
 
     def __init__(
-        self, yaws_deg: tuple[float, ...], iterations: int, tolerance_m: float, cache_mm: float = 2
+        self,
+        yaws_deg: tuple[float, ...],
+        iterations: int,
+        tolerance_m: float,
+        ready: str = "home",
+        cache_mm: float = 2,
     ) -> None:
         import placo
 
@@ -67,6 +91,11 @@ class Kinematics:
         T_rel = np.array(self.fk.get_T_a_b(TOOL_FRAME["cutter"], BASKET_FRAME))
         self.ready_tip_world_m: np.ndarray = T_tip[:3, 3].copy()
         self.ready_basket_below_m = float(T_rel[0, 3])
+        self.ready_R_world_cutter: np.ndarray | None = None  # level, forward (HOME_RAD's)
+        if ready == "low":
+            self.ready_tip_world_m = np.array(LOW_READY_TIP_WORLD_M)
+            self.ready_basket_below_m = LOW_READY_BASKET_BELOW_M
+            self.ready_R_world_cutter = low_ready_rotation()
 
     def _set(self, q_by_role: dict[ArmRole, tuple[float, ...]]) -> None:
         for role, q in q_by_role.items():

@@ -104,6 +104,9 @@ class Machine:
     target: FruitRecord | None = None
     progress: Progress = field(default_factory=lambda: Progress(0, 0))
     cut: CutState | None = None
+    verify: CutState | None = None  # an unconfirmed cut being checked from the ready pose
+    arrived_ns: int | None = None  # when the ready pose was reached while verifying
+    looking: bool = False  # verifying: backed out to the pre-pose, now going to look
     home_since_ns: int | None = None
     last_tip_world_m: np.ndarray | None = None
     events: list[Event] = field(default_factory=list)
@@ -140,8 +143,10 @@ class Machine:
         rec = self.target
         if self.phase in ("idle", "home", "done") or rec is None:
             return Goal(self.phase, self._ready(), ignore=self.book.ignore_ids(None))
-        poses = pre_pose if self.phase in ("approach", "leave") else harvest_pose
         touching = self.phase in ("harvest", "cut", "leave")
+        if self.verify is not None and self.looking:  # at the pre-pose: on to look from afar
+            return Goal(self.phase, self._ready(), rec.fruit_id, self.book.ignore_ids(None))
+        poses = pre_pose if self.phase in ("approach", "leave") else harvest_pose
         return Goal(
             self.phase,
             poses(rec.planned, self.pose_settings),
@@ -203,34 +208,69 @@ class Machine:
         if now - cut.stamp_ns < self.s.collect_timeout_s * NS:
             return
         if self._still_attached(rec, cut):
-            if rec.cuts < self.s.max_cut_attempts:
-                self.events.append(
-                    Event(
-                        "replanned",
-                        rec.fruit_id,
-                        reason=f"cut {rec.cuts} failed (fruit still on its branch): retrying",
-                    )
-                )
-                self.tools.append(("open", rec.fruit_id))
-                rec.frozen = False  # re-aim at the fruit as it is seen now
-                self._enter("harvest", now)
-                return
-            why = f"cut failed {rec.cuts} times (fruit still on its branch)"
-            self.events.append(Event("fruit_skipped", rec.fruit_id, reason=why))
-            self._finish(rec, now, "cut_failed", why)
-        else:
-            why = f"not in the basket {self.s.collect_timeout_s:.1f} s after the cut, gone from "
-            why += "its branch"
-            self.events.append(Event("fruit_dropped", rec.fruit_id, reason=why))
-            self._finish(rec, now, "dropped", why)
+            self._cut_failed(now, "harvest")
+            return
+        # Not in the basket, and not seen on its branch since the cut: the tools may hide it
+        # (they are between the camera and the fruit). Back out to the ready pose and look.
+        self.verify = cut
         self._open_and_leave(now)
 
+    def _cut_failed(self, now: int, retry_from: HarvestPhase) -> None:
+        """The fruit is still on its branch: cut again (from ``retry_from``) or give up."""
+        rec = self.target
+        assert rec is not None
+        if self.cut is not None:  # straight from the cut phase: the shears are still closed
+            self.tools.append(("open", rec.fruit_id))
+        self.cut = self.verify = None
+        if rec.cuts < self.s.max_cut_attempts:
+            why = f"cut {rec.cuts} failed (fruit still on its branch): retrying"
+            self.events.append(Event("replanned", rec.fruit_id, reason=why))
+            rec.frozen = False  # re-aim at the fruit as it is seen now
+            self._enter(retry_from, now)
+            return
+        why = f"cut failed {rec.cuts} times (fruit still on its branch)"
+        self.events.append(Event("fruit_skipped", rec.fruit_id, reason=why))
+        self._finish(rec, now, "cut_failed", why)
+        self._enter("leave", now)
+
     def _leave(self, now: int, st: ControlStatus, basket: int | None) -> None:
+        if self.verify is not None:
+            self._verify(now, st)
+            return
         reached = self._reached(st, self.s.leave_tolerance_m, loose=True)
         if reached or now - self.progress.since_ns > self.s.leave_timeout_s * NS:
             rec = self.target
             if rec is not None and rec.finished_ns is None:
                 rec.finished_ns = now
+            self.target = None
+            self._select(now)
+
+    def _verify(self, now: int, st: ControlStatus) -> None:
+        """After an unconfirmed cut, at the ready pose: the fruit seen again where it was cut →
+        the cut failed; not seen ``verify_s`` after arriving → it fell outside the basket."""
+        rec, cut = self.target, self.verify
+        assert rec is not None and cut is not None
+        if self._still_attached(rec, cut):
+            self._cut_failed(now, "approach")
+            return
+        if not self.looking:  # first back out along the approach line (the fruit may be there)
+            if self._reached(st, self.s.leave_tolerance_m, loose=True) or (
+                now - self.progress.since_ns > self.s.leave_timeout_s * NS
+            ):
+                self.looking = True
+                self.progress = Progress(now, self.next_seq)
+            return
+        if self.arrived_ns is None and (
+            self._reached(st, self.s.home_tolerance_m, loose=True)
+            or now - self.progress.since_ns > self.s.home_timeout_s * NS
+        ):
+            self.arrived_ns = now
+        if self.arrived_ns is not None and now - self.arrived_ns >= self.s.verify_s * NS:
+            why = f"not in the basket {self.s.collect_timeout_s:.1f} s after the cut, not seen "
+            why += "on its branch since"
+            self.events.append(Event("fruit_dropped", rec.fruit_id, reason=why))
+            self._finish(rec, now, "dropped", why, cycle_done=True)
+            self.verify = None
             self.target = None
             self._select(now)
 
@@ -320,6 +360,8 @@ class Machine:
         )
         self.phase = phase
         self.progress = Progress(now, self.next_seq)
+        self.arrived_ns = None
+        self.looking = False
         goal = self.goal()
         if goal.poses is not None:
             self.last_tip_world_m = goal.poses.tip_world_m
@@ -355,6 +397,8 @@ class Machine:
         if rec is not None and not rec.finished:
             rec.outcome, rec.reason = "pending", why
         for r in self.book.detected():
+            if not r.finished and r.losses > 0 and not r.in_scene:
+                r.outcome, r.reason = "lost", "left the scene and never came back"
             if r.finished_ns is None and r.finished:
                 r.finished_ns = now
         self.target = None
@@ -423,4 +467,5 @@ class Machine:
         return self.kin.ready_tip_world_m
 
     def _ready(self) -> ToolPoses:
-        return ToolPoses(self.kin.ready_tip_world_m, self.kin.ready_basket_below_m)
+        k = self.kin
+        return ToolPoses(k.ready_tip_world_m, k.ready_basket_below_m, k.ready_R_world_cutter)

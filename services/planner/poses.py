@@ -39,10 +39,12 @@ class FruitShape:
 
 @dataclass(frozen=True)
 class ToolPoses:
-    """Cutter tip position (world, m) and the dish's distance under it (cutter +x, m)."""
+    """Cutter tip position (world, m), the dish's distance under it (cutter +x, m), and the
+    cutter orientation (None: level, pointing forward, the harvest orientation)."""
 
     tip_world_m: np.ndarray
     basket_below_m: float
+    R_world_cutter: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -89,6 +91,11 @@ def plan_target(
     if poses is None:
         return PlanTarget(header=header, phase=phase, fruit_id=fruit_id)
     t = poses.tip_world_m
+    q = (
+        Q_CUTTER_FORWARD
+        if poses.R_world_cutter is None
+        else matrix_to_quat_xyzw(poses.R_world_cutter)
+    )
     return PlanTarget(
         header=header,
         phase=phase,
@@ -96,7 +103,7 @@ def plan_target(
         absolute=AbsoluteTarget(
             frame_id="world",
             position_m=(float(t[0]), float(t[1]), float(t[2])),
-            orientation_xyzw=Q_CUTTER_FORWARD,
+            orientation_xyzw=q,
             free_axis="x",
         ),
         relative=RelativeTarget(
