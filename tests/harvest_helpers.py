@@ -27,11 +27,7 @@ from services.runtime.settings import load_settings
 from services.runtime.stamp import Stamper
 from services.sim.render.camera import head_camera_pose
 
-MARKS = {
-    "fruit_collected": "harvested",
-    "fruit_dropped": "harvested",
-    "fruit_skipped": "unreachable",
-}
+HARVESTED_EVENTS = ("fruit_collected", "fruit_dropped")  # the scene estimator's marks
 
 
 @dataclass
@@ -55,8 +51,10 @@ class TruthScene:
     def handle(self, topic: str, msg: Any) -> list[tuple[str, Any]]:
         if topic == "harvest/events":
             ev: HarvestEvent = msg
-            if ev.fruit_id is not None and ev.event in MARKS:
-                self.marks[ev.fruit_id] = MARKS[ev.event]
+            if ev.fruit_id is not None and ev.event in HARVESTED_EVENTS:
+                self.marks[ev.fruit_id] = "harvested"
+            elif ev.fruit_id is not None and ev.outcome == "unreachable":
+                self.marks.setdefault(ev.fruit_id, "unreachable")
             return []
         if topic != "sim/truth":
             return []

@@ -142,6 +142,7 @@ class PlannerCore:
                         phase_from=e.phase_from,
                         phase_to=e.phase_to,
                         reason=e.reason,
+                        outcome=e.outcome,
                     ),
                 )
             )

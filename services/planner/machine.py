@@ -50,6 +50,7 @@ class Event:
     phase_from: str = ""
     phase_to: str = ""
     reason: str = ""
+    outcome: FruitOutcome | None = None  # set when the event settles the fruit
 
 
 @dataclass(frozen=True)
@@ -168,7 +169,7 @@ class Machine:
             why += "frames before)"
             if rec.losses >= self.s.max_losses:
                 self._finish(rec, now, "lost", f"{why}, {rec.losses} times", cycle_done=True)
-                self.events.append(Event("fruit_lost", rec.fruit_id, reason=why))
+                self.events.append(Event("fruit_lost", rec.fruit_id, outcome="lost", reason=why))
             else:
                 self.events.append(Event("fruit_lost", rec.fruit_id, reason=f"{why}; may retry"))
                 rec.started_ns = None
@@ -201,7 +202,11 @@ class Machine:
         rec, cut = self.target, self.cut
         assert rec is not None and cut is not None
         if basket is not None and basket > cut.basket_before:
-            self.events.append(Event("fruit_collected", rec.fruit_id, reason="basket count up"))
+            self.events.append(
+                Event(
+                    "fruit_collected", rec.fruit_id, outcome="harvested", reason="basket count up"
+                )
+            )
             self._finish(rec, now, "harvested", "")
             self._open_and_leave(now)
             return
@@ -229,7 +234,7 @@ class Machine:
             self._enter(retry_from, now)
             return
         why = f"cut failed {rec.cuts} times (fruit still on its branch)"
-        self.events.append(Event("fruit_skipped", rec.fruit_id, reason=why))
+        self.events.append(Event("fruit_skipped", rec.fruit_id, outcome="cut_failed", reason=why))
         self._finish(rec, now, "cut_failed", why)
         self._enter("leave", now)
 
@@ -268,7 +273,7 @@ class Machine:
         if self.arrived_ns is not None and now - self.arrived_ns >= self.s.verify_s * NS:
             why = f"not in the basket {self.s.collect_timeout_s:.1f} s after the cut, not seen "
             why += "on its branch since"
-            self.events.append(Event("fruit_dropped", rec.fruit_id, reason=why))
+            self.events.append(Event("fruit_dropped", rec.fruit_id, outcome="dropped", reason=why))
             self._finish(rec, now, "dropped", why, cycle_done=True)
             self.verify = None
             self.target = None
@@ -343,7 +348,7 @@ class Machine:
         which = "harvest pose" if not hv.reachable else "pre-pose"
         bad = hv if not hv.reachable else pv
         why = f"unreachable: {which} out of reach ({bad.why()})"
-        self.events.append(Event("fruit_skipped", rec.fruit_id, reason=why))
+        self.events.append(Event("fruit_skipped", rec.fruit_id, outcome="unreachable", reason=why))
         self._finish(rec, now, "unreachable", why, cycle_done=True)
         return False
 
@@ -417,7 +422,7 @@ class Machine:
         err = self.progress.best_m
         what = f"timed out after {timeout_s:.1f} s" if over else "no progress"
         why = f"unreachable: {self.phase} {what} (best task error {err * 1e3:.0f} mm)"
-        self.events.append(Event("fruit_skipped", rec.fruit_id, reason=why))
+        self.events.append(Event("fruit_skipped", rec.fruit_id, outcome="unreachable", reason=why))
         self._finish(rec, now, "unreachable", why, cycle_done=not leave)
         if leave:
             rec.frozen = True
