@@ -6,6 +6,7 @@ from __future__ import annotations
 import pytest
 
 from schemas.topics import TOPICS
+from services.replay.resim import resim
 from tests.helpers import harvest, payloads_by_topic, short_dir
 from tests.sim_helpers import scenario_file
 
@@ -46,3 +47,10 @@ services:
     assert 0.7 < summary.sim_time_s < 1.5
     statuses, targets = rec["control/status"], rec["plan/target"]
     assert len(targets) in (len(statuses), len(statuses) - 1)  # the last status may be unanswered
+    # resim of the planner and the controller on that recording: every output identical, and a
+    # planner that ends by itself (exit 0 after its summary) is no failure.
+    report = resim(d / "rec" / "empty.mcap", ["controller", "planner"], timeout_s=20.0)
+    assert report.ok and report.identical_ratio == 1.0, report.to_json()
+    assert not report.warnings, report.warnings
+    by = {t.topic: t for t in report.topics}
+    assert by["plan/target"].identical == len(targets) and by["harvest/summary"].identical == 1
