@@ -52,7 +52,9 @@ class FruitResult(Frozen):
         "the tools never reached it).",
     )
     duration_s: NonNegFloat | None = Field(
-        default=None, description="Sim seconds of its cycle (finished − started)."
+        default=None,
+        description="Sim seconds the tools spent on it: from its selection to the tools back at "
+        "its pre-pose, summed over attempts (a blocked fruit retried later, a lost one).",
     )
     cuts: int = Field(default=0, ge=0, description="Cut commands sent for it.")
 

@@ -80,6 +80,22 @@ class Settings(ServiceSettings):
     orientation_tolerance_rad: float = Field(
         default=0.05, gt=0, description="Both tools' orientation errors below, rad."
     )
+    catch_tolerance_m: float = Field(
+        default=0.03,
+        gt=0,
+        description="The dish may stay this far from its target when a neighbour holds it back "
+        "(the controller's fruit dampers): a fruit (d_h ≤ 5 cm) still falls into the 8.5 cm "
+        "dish. Cut once the dish has settled (no progress for settle_s), m.",
+    )
+    settle_s: float = Field(
+        default=0.3, gt=0, description="No progress this long: the tools have settled, s."
+    )
+    defer_blocked: bool = Field(
+        default=True,
+        description="A fruit whose approach or harvest stops making progress is put back once "
+        "and tried again when nothing else is left (a neighbour harvested meanwhile may clear "
+        "the way); the second time it is unreachable.",
+    )
     leave_tolerance_m: float = Field(
         default=0.03, gt=0, description="Back at the pre-pose after a fruit: error below, m."
     )

@@ -38,8 +38,11 @@ class FruitRecord:
     in_basket: bool = False
     outcome: FruitOutcome | None = None  # None: still to do
     reason: str = ""
-    started_ns: int | None = None
-    finished_ns: int | None = None
+    started_ns: int | None = None  # first selection
+    finished_ns: int | None = None  # end of the cycle that settled it
+    attempt_ns: int | None = None  # start of the current attempt
+    spent_ns: int = 0  # sim time the tools spent on it, over every attempt
+    deferred: bool = False  # blocked once: retried when nothing else is left
     cuts: int = 0
     losses: int = 0
     frozen: bool = False  # cutting or leaving: the planning position no longer follows the scene
@@ -123,8 +126,9 @@ class FruitBook:
             self.moved.append((rec.key, d))
 
     def candidates(self, max_unseen: int) -> list[FruitRecord]:
-        """Records still to do, in the scene, seen recently, not in the basket, by key."""
-        return [
+        """Records still to do, in the scene, seen recently, not in the basket, by key; fruit
+        deferred as blocked only when no other is left."""
+        ok = [
             r
             for _, r in sorted(self.records.items())
             if not r.finished
@@ -133,6 +137,8 @@ class FruitBook:
             and r.seen.frames_unseen <= max_unseen
             and r.seen.status not in ("harvested", "unreachable")
         ]
+        fresh = [r for r in ok if not r.deferred]
+        return fresh or ok
 
     def ignore_ids(self, rec: FruitRecord | None) -> tuple[int, ...]:
         """IDs the controller need not avoid: the target's (all of them) while the tools touch

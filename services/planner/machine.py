@@ -36,7 +36,13 @@ from services.planner import Settings
 from services.planner.book import FruitBook, FruitRecord
 from services.planner.kinematics import Kinematics
 from services.planner.order import nearest_first, planned_order
-from services.planner.poses import PoseSettings, ToolPoses, harvest_pose, pre_pose
+from services.planner.poses import (
+    PoseSettings,
+    ToolPoses,
+    harvest_pose,
+    pre_pose,
+    under_the_dish,
+)
 
 NS = 1_000_000_000
 
@@ -168,15 +174,21 @@ class Machine:
             why = f"left the scene during the approach (last seen {rec.seen.frames_unseen} "
             why += "frames before)"
             if rec.losses >= self.s.max_losses:
-                self._finish(rec, now, "lost", f"{why}, {rec.losses} times", cycle_done=True)
+                self._finish(rec, now, "lost", f"{why}, {rec.losses} times")
                 self.events.append(Event("fruit_lost", rec.fruit_id, outcome="lost", reason=why))
             else:
                 self.events.append(Event("fruit_lost", rec.fruit_id, reason=f"{why}; may retry"))
-                rec.started_ns = None
+            self._end_attempt(rec, now)
             self.target = None
             self._select(now)
             return
-        if self._reached(st, self.s.approach_tolerance_m):
+        if self._reached(st, self.s.approach_tolerance_m, self.s.catch_tolerance_m):
+            self._enter("harvest", now)
+            return
+        # A pre-pose nearly reached whose dish a neighbour holds back: try the harvest pose
+        # (the fruit may still be caught; the harvest phase judges).
+        near = self._reached(st, 2 * self.s.approach_tolerance_m, loose=True)
+        if near and self.progress.stuck(now, self.s.settle_s):
             self._enter("harvest", now)
             return
         self._check_stuck(now, self.s.approach_timeout_s, leave=False)
@@ -184,7 +196,9 @@ class Machine:
     def _harvest(self, now: int, st: ControlStatus, basket: int | None) -> None:
         rec = self.target
         assert rec is not None
-        if self._reached(st, self.s.harvest_tolerance_m):
+        exact = self._reached(st, self.s.harvest_tolerance_m)
+        held = self._reached(st, self.s.harvest_tolerance_m, self.s.catch_tolerance_m)
+        if exact or (held and self.progress.stuck(now, self.s.settle_s)):
             rec.cuts += 1
             rec.frozen = True  # the estimate of a falling fruit must not move the target
             self.cut = CutState(
@@ -245,8 +259,8 @@ class Machine:
         reached = self._reached(st, self.s.leave_tolerance_m, loose=True)
         if reached or now - self.progress.since_ns > self.s.leave_timeout_s * NS:
             rec = self.target
-            if rec is not None and rec.finished_ns is None:
-                rec.finished_ns = now
+            if rec is not None:
+                self._end_attempt(rec, now)
             self.target = None
             self._select(now)
 
@@ -274,7 +288,8 @@ class Machine:
             why = f"not in the basket {self.s.collect_timeout_s:.1f} s after the cut, not seen "
             why += "on its branch since"
             self.events.append(Event("fruit_dropped", rec.fruit_id, outcome="dropped", reason=why))
-            self._finish(rec, now, "dropped", why, cycle_done=True)
+            self._finish(rec, now, "dropped", why)
+            self._end_attempt(rec, now)
             self.verify = None
             self.target = None
             self._select(now)
@@ -321,13 +336,15 @@ class Machine:
         self.target = rec
         if rec.started_ns is None:
             rec.started_ns = now
+        rec.attempt_ns = now
         self.events.append(Event("fruit_selected", rec.fruit_id, reason=why))
         self._enter("approach", now)
 
     def _planned_first(self, cands: list[FruitRecord]) -> tuple[FruitRecord, str]:
         pts = np.array([pre_pose(r.planned, self.pose_settings).tip_world_m for r in cands])
         start = self.last_tip_world_m if self.last_tip_world_m is not None else self._ready_tip()
-        order = planned_order(start, pts, self._ready_tip(), self.s.planned_exact_max)
+        before = under_the_dish([r.planned for r in cands], self.pose_settings)
+        order = planned_order(start, pts, self._ready_tip(), self.s.planned_exact_max, before)
         rec = cands[order[0]]
         return rec, f"planned order ({len(cands)} fruit): " + " → ".join(
             str(cands[i].fruit_id) for i in order
@@ -349,7 +366,8 @@ class Machine:
         bad = hv if not hv.reachable else pv
         why = f"unreachable: {which} out of reach ({bad.why()})"
         self.events.append(Event("fruit_skipped", rec.fruit_id, outcome="unreachable", reason=why))
-        self._finish(rec, now, "unreachable", why, cycle_done=True)
+        self._finish(rec, now, "unreachable", why)
+        rec.finished_ns = now  # never attempted
         return False
 
     # ---- helpers -----------------------------------------------------------------------------
@@ -383,24 +401,26 @@ class Machine:
         self.cut = None
         self._enter("leave", now)
 
-    def _finish(
-        self,
-        rec: FruitRecord,
-        now: int,
-        outcome: FruitOutcome,
-        reason: str,
-        cycle_done: bool = False,
-    ) -> None:
-        """Record the outcome. The fruit's cycle ends now (``cycle_done``) or, when the tools
-        must still back out, once they are at the pre-pose (``_leave``)."""
+    def _finish(self, rec: FruitRecord, now: int, outcome: FruitOutcome, reason: str) -> None:
+        """Record the outcome; the attempt ends with ``_end_attempt`` (at once, or once the
+        tools are back at the pre-pose)."""
         rec.outcome, rec.reason = outcome, reason
-        if cycle_done:
+
+    def _end_attempt(self, rec: FruitRecord, now: int) -> None:
+        """The tools are done with this fruit for now: its time adds up; a settled fruit's
+        cycle ends here."""
+        if rec.attempt_ns is not None:
+            rec.spent_ns += now - rec.attempt_ns
+            rec.attempt_ns = None
+        if rec.finished and rec.finished_ns is None:
             rec.finished_ns = now
 
     def _end_run(self, now: int, why: str) -> None:
         rec = self.target
         if rec is not None and not rec.finished:
             rec.outcome, rec.reason = "pending", why
+        if rec is not None:
+            self._end_attempt(rec, now)
         for r in self.book.detected():
             if not r.finished and r.losses > 0 and not r.in_scene:
                 r.outcome, r.reason = "lost", "left the scene and never came back"
@@ -421,26 +441,42 @@ class Machine:
             return
         err = self.progress.best_m
         what = f"timed out after {timeout_s:.1f} s" if over else "no progress"
-        why = f"unreachable: {self.phase} {what} (best task error {err * 1e3:.0f} mm)"
-        self.events.append(Event("fruit_skipped", rec.fruit_id, outcome="unreachable", reason=why))
-        self._finish(rec, now, "unreachable", why, cycle_done=not leave)
+        detail = f"{self.phase} {what} (best task error {err * 1e3:.0f} mm)"
+        if self.s.defer_blocked and not rec.deferred:
+            # A neighbour or the trunk may hold the tools back; harvesting the others first
+            # may clear the way: try once more when nothing else is left.
+            rec.deferred = True
+            why = f"blocked: {detail}; retried after the others"
+            self.events.append(Event("fruit_skipped", rec.fruit_id, reason=why))
+        else:
+            why = f"unreachable: {detail}"
+            self.events.append(
+                Event("fruit_skipped", rec.fruit_id, outcome="unreachable", reason=why)
+            )
+            self._finish(rec, now, "unreachable", why)
         if leave:
             rec.frozen = True
             self._enter("leave", now)
         else:
+            self._end_attempt(rec, now)
             self.target = None
             self._select(now)
 
-    def _reached(self, st: ControlStatus, tol_m: float, loose: bool = False) -> bool:
-        """The status is of this phase's targets, not holding, and within tolerance."""
+    def _reached(
+        self, st: ControlStatus, tol_m: float, rel_tol_m: float | None = None, loose: bool = False
+    ) -> bool:
+        """The status is of this phase's targets, not holding, and within tolerance (the
+        cutter's ``tol_m``; the dish's ``rel_tol_m``, default relative_tolerance_m; orientations;
+        ``loose``: the cutter's position only)."""
         if st.target_seq is None or st.target_seq < self.progress.first_target_seq or st.reason:
             return False
         if st.abs_position_error_m > tol_m:
             return False
         if loose:
             return True
+        rel_tol = self.s.relative_tolerance_m if rel_tol_m is None else rel_tol_m
         return (
-            st.rel_position_error_m <= self.s.relative_tolerance_m
+            st.rel_position_error_m <= rel_tol
             and st.abs_orientation_error_rad <= self.s.orientation_tolerance_rad
             and st.rel_orientation_error_rad <= self.s.orientation_tolerance_rad
         )

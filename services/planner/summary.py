@@ -15,11 +15,7 @@ def run_summary(
     results = []
     for rec in book.detected():
         started, finished = rec.started_ns, rec.finished_ns
-        duration = (
-            (finished - started) * 1e-9
-            if started is not None and finished is not None and finished >= started
-            else None
-        )
+        duration = rec.spent_ns * 1e-9 if started is not None else None
         results.append(
             FruitResult(
                 fruit_id=rec.fruit_id,

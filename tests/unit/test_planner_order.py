@@ -57,3 +57,16 @@ def test_one_or_no_fruit() -> None:
     s = np.zeros(3)
     assert planned_order(s, np.zeros((0, 3)), s) == []
     assert planned_order(s, np.ones((1, 3)), s) == [0]
+
+
+def test_precedences_are_kept_and_a_cycle_is_ignored() -> None:
+    rng = np.random.default_rng(11)
+    pts = rng.uniform((0.4, -0.4, 1.0), (0.9, 0.4, 1.6), (6, 3))
+    start = end = np.array([0.55, 0.0, 1.05])
+    free = planned_order(start, pts, end)
+    # force the free order's last point first and its first point last
+    before = [(free[-1], i) for i in range(6) if i != free[-1]] + [(i, free[0]) for i in range(6)]
+    for exact_max in (12, 3):  # exact and 2-opt
+        got = planned_order(start, pts, end, exact_max, before)
+        assert got[0] == free[-1] and got[-1] == free[0]
+    assert planned_order(start, pts, end, before=[(0, 1), (1, 0)]) == free

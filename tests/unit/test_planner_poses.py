@@ -59,3 +59,12 @@ def test_plan_target_carries_the_tool_orientations_and_free_axes() -> None:
     assert t.ignore_fruit_ids == (3, 7) and t.fruit_id == 3
     hold = plan_target(h, "done", None)
     assert hold.absolute is None and hold.relative is None
+
+
+def test_a_fruit_hanging_where_the_dish_goes_comes_first() -> None:
+    from services.planner.poses import under_the_dish
+
+    top = FruitShape(np.array([0.7, 0.0, 1.40]), 0.04, 0.04)
+    under = FruitShape(np.array([0.72, 0.05, 1.27]), 0.04, 0.04)  # where top's dish goes
+    beside = FruitShape(np.array([0.7, 0.25, 1.30]), 0.04, 0.04)  # 25 cm to the side
+    assert under_the_dish([top, under, beside], P) == [(1, 0)]
