@@ -65,7 +65,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="the whole harvest over seeds, for each harvest-order policy",
         description="Runs the harvest (sim, detector, tracker, scene, controller, planner) on a "
         "scenario for each seed and each order policy; judged against the sim's truth: fruit "
-        "harvested and reachable (IK on the true fruit), success rate, unreachable fruit "
+        "harvested and reachable (IK on the true fruit, with the fruit in its way first), "
+        "success rate, unreachable fruit "
         "identified, collisions (sim contacts), median sim seconds per harvested fruit, wall "
         "time, real-time factor. --mode inproc runs every core in one process in lock-step "
         "order; --mode stack runs the real stack under the supervisor (slower).",

@@ -90,6 +90,13 @@ class Settings(ServiceSettings):
     settle_s: float = Field(
         default=0.3, gt=0, description="No progress this long: the tools have settled, s."
     )
+    neighbour_clearance_m: float = Field(
+        default=0.02,
+        ge=0,
+        description="Reachability in clutter: a neighbour closer than this to where the dish or "
+        "the cutter goes (harvest pose, and the move from the pre-pose) blocks the fruit; the "
+        "controller's fruit damper keeps its d_s (2 cm) from every fruit, m.",
+    )
     defer_blocked: bool = Field(
         default=True,
         description="A fruit whose approach or harvest stops making progress is put back once "

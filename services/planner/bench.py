@@ -11,7 +11,9 @@ Two ways to run a seed:
 Evaluation uses the sim's ground truth (allowed here: it is the judge, never an input of the
 planner): a fruit is *reachable* when the IK reaches its harvest pose and pre-pose computed from
 its true centre and semi-axes (the planner's own reachability test on perfect data); the
-planner's fruit (track IDs) are matched to sim fruit by their last scene position.
+planner's fruit (track IDs) are matched to sim fruit by their last scene position. In clutter a
+fruit also needs an order in which every neighbour in its tools' way goes first (the planner's
+own clearance check, on the true fruit).
 """
 
 from __future__ import annotations
@@ -201,14 +203,20 @@ def run_stack(
 # ---- evaluation ------------------------------------------------------------------------------
 @dataclass
 class Truth:
-    """Per sim fruit: reachable by the planner's IK on its true geometry."""
+    """Per sim fruit: whether it can be harvested at all (see ``truth_reachability``), and why
+    not."""
 
     reachable: dict[int, bool]
+    why: dict[int, str]
 
 
 def truth_reachability(truth: GroundTruth, planner_settings: dict[str, Any]) -> Truth:
+    """A fruit is reachable when the IK reaches its harvest pose and pre-pose (true centre and
+    semi-axes) and there is an order in which every fruit in its tools' way is harvested before
+    it (``clutter.blockers`` with the planner's clearance; fixpoint from the free ones)."""
     from services.planner import SERVICE as PLAN
     from services.planner import Settings as PlannerSettings
+    from services.planner.clutter import blockers
     from services.planner.core import PlannerCore
     from services.planner.poses import FruitShape, harvest_pose, pre_pose
     from services.runtime.settings import load_settings
@@ -217,15 +225,35 @@ def truth_reachability(truth: GroundTruth, planner_settings: dict[str, Any]) -> 
     assert isinstance(settings, PlannerSettings)
     core = PlannerCore(settings)  # its IK and pose settings
     ps = core.machine.pose_settings
-    out = {}
-    for f in truth.fruits:
-        shape = FruitShape(np.array(f.position_world_m), f.semi_axes_m[0], f.semi_axes_m[2])
+    shapes = {
+        f.fruit_id: FruitShape(np.array(f.position_world_m), f.semi_axes_m[0], f.semi_axes_m[2])
+        for f in truth.fruits
+    }
+    why: dict[int, str] = {}
+    ik_ok: set[int] = set()
+    for i, shape in shapes.items():
         h, p = harvest_pose(shape, ps), pre_pose(shape, ps)
-        out[f.fruit_id] = (
-            core.kin.reach(h.tip_world_m, h.basket_below_m).reachable
-            and core.kin.reach(p.tip_world_m, p.basket_below_m).reachable
-        )
-    return Truth(out)
+        if core.kin.reach(h.tip_world_m, h.basket_below_m).reachable and (
+            core.kin.reach(p.tip_world_m, p.basket_below_m).reachable
+        ):
+            ik_ok.add(i)
+        else:
+            why[i] = "IK"
+    done: set[int] = set()
+    changed = True
+    while changed:
+        changed = False
+        for i in sorted(ik_ok - done):
+            others = [k for k in sorted(shapes) if k != i and k not in done]
+            hit = blockers(
+                shapes[i], [shapes[k] for k in others], ps, settings.neighbour_clearance_m
+            )
+            if not hit:
+                done.add(i)
+                changed = True
+    for i in sorted(ik_ok - done):
+        why[i] = "blocked"
+    return Truth({i: i in done for i in sorted(shapes)}, why)
 
 
 def evaluate(
@@ -233,7 +261,8 @@ def evaluate(
 ) -> dict[str, Any]:
     """Figures of one run against the truth (the first frame's fruit, before any cut)."""
     s, last = got.summary, got.truth
-    reach = truth_reachability(first_truth, planner_settings).reachable
+    judged = truth_reachability(first_truth, planner_settings)
+    reach = judged.reachable
     centres = {f.fruit_id: np.array(f.position_world_m) for f in first_truth.fruits}
     outcome: dict[int, str] = {}  # sim fruit → the planner's outcome
     for r in s.fruits if s is not None else ():
@@ -265,6 +294,7 @@ def evaluate(
         "harvested_reachable": harvested_reachable,
         "success_rate": harvested_reachable / len(reachable) if reachable else 1.0,
         "unreachable_true": len(unreachable),
+        "unreachable_blocked": sum(1 for i in unreachable if judged.why.get(i) == "blocked"),
         "unreachable_reported": len(reported_unreachable),
         "unreachable_correct": len(reported_unreachable & set(unreachable)),
         "reachable_called_unreachable": len(reported_unreachable - set(unreachable)),
@@ -352,6 +382,7 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "harvested",
             "harvested_reachable",
             "unreachable_true",
+            "unreachable_blocked",
             "unreachable_reported",
             "unreachable_correct",
             "reachable_called_unreachable",
@@ -382,10 +413,11 @@ def table(result: dict[str, Any]) -> str:
     """A plain-text table of the per-policy figures."""
     keys = (
         ("harvested", "harvested"),
-        ("reachable", "reachable (IK on truth)"),
+        ("reachable", "reachable (truth)"),
         ("success_rate", "success rate"),
         ("unreachable_correct", "unreachable identified"),
         ("unreachable_true", "unreachable (truth)"),
+        ("unreachable_blocked", "  of which blocked by fruit"),
         ("reachable_called_unreachable", "reachable called unreachable"),
         ("dropped", "dropped"),
         ("collisions", "collisions (sim contacts)"),

@@ -34,15 +34,10 @@ from schemas.control import ControlStatus, HarvestPhase
 from schemas.harvest import FruitOutcome, HarvestEventKind
 from services.planner import Settings
 from services.planner.book import FruitBook, FruitRecord
+from services.planner.clutter import blockers
 from services.planner.kinematics import Kinematics
 from services.planner.order import nearest_first, planned_order
-from services.planner.poses import (
-    PoseSettings,
-    ToolPoses,
-    harvest_pose,
-    pre_pose,
-    under_the_dish,
-)
+from services.planner.poses import PoseSettings, ToolPoses, harvest_pose, pre_pose
 
 NS = 1_000_000_000
 
@@ -313,26 +308,23 @@ class Machine:
         return self.book.candidates(self.s.lost_after_frames)
 
     def _select(self, now: int) -> None:
-        """The next fruit by the policy; unreachable ones are skipped with the IK's reason."""
+        """The next fruit by the policy. Before committing: the IK must reach its poses
+        (else unreachable, final) and no neighbour may stand where the tools go (else it waits
+        for the others: a blocker harvested first clears the way; blocked with nothing else
+        left, or by a fruit that stays, it is unreachable)."""
         while True:
             cands = self._candidates()
             if not cands:
                 self._go_home(now)
                 return
-            if self.s.order == "planned":
-                for r in cands:
-                    self._check_reach(r, now)
-                cands = [r for r in cands if not r.finished]
-                if not cands:
-                    continue
-                rec, why = self._planned_first(cands)
-            else:
-                i = nearest_first([r.seen.distance_m for r in cands])[0]
-                rec = cands[i]
-                why = f"nearest ({rec.seen.distance_m:.3f} m from the camera)"
-                if not self._check_reach(rec, now):
-                    continue
-            break
+            picked = (
+                self._planned_pick(cands, now)
+                if self.s.order == "planned"
+                else self._nearest_pick(cands, now)
+            )
+            if picked is not None:
+                break
+        rec, why = picked
         self.target = rec
         if rec.started_ns is None:
             rec.started_ns = now
@@ -340,15 +332,78 @@ class Machine:
         self.events.append(Event("fruit_selected", rec.fruit_id, reason=why))
         self._enter("approach", now)
 
-    def _planned_first(self, cands: list[FruitRecord]) -> tuple[FruitRecord, str]:
-        pts = np.array([pre_pose(r.planned, self.pose_settings).tip_world_m for r in cands])
+    def _nearest_pick(self, cands: list[FruitRecord], now: int) -> tuple[FruitRecord, str] | None:
+        """The nearest candidate that can be harvested now; None: the candidates changed."""
+        for i in nearest_first([r.seen.distance_m for r in cands]):
+            rec = cands[i]
+            if not self._check_reach(rec, now):
+                return None
+            blocking = self._blockers(rec)
+            if not blocking:
+                return rec, f"nearest ({rec.seen.distance_m:.3f} m from the camera)"
+            others = [r for r in cands if r is not rec and not r.deferred]
+            self._blocked(rec, blocking, now, wait=bool(others))
+            if rec.finished or not others:
+                return None
+        return None
+
+    def _planned_pick(self, cands: list[FruitRecord], now: int) -> tuple[FruitRecord, str] | None:
+        """The first fruit of the shortest order that harvests every blocker before the fruit
+        it blocks; None: the candidates changed."""
+        for r in cands:
+            self._check_reach(r, now)
+        ok = [r for r in cands if not r.finished]
+        if len(ok) != len(cands):
+            return None
+        index = {r.key: i for i, r in enumerate(ok)}
+        before: list[tuple[int, int]] = []
+        for j, r in enumerate(ok):
+            blocking = self._blockers(r)
+            staying = [b for b in blocking if b.key not in index]
+            if staying:
+                self._blocked(r, staying, now, wait=False)
+                return None
+            before += [(index[b.key], j) for b in blocking]
+        pts = np.array([pre_pose(r.planned, self.pose_settings).tip_world_m for r in ok])
         start = self.last_tip_world_m if self.last_tip_world_m is not None else self._ready_tip()
-        before = under_the_dish([r.planned for r in cands], self.pose_settings)
         order = planned_order(start, pts, self._ready_tip(), self.s.planned_exact_max, before)
-        rec = cands[order[0]]
-        return rec, f"planned order ({len(cands)} fruit): " + " → ".join(
-            str(cands[i].fruit_id) for i in order
+        rec = ok[order[0]]
+        if self._blockers(rec):  # the precedences could not all hold (blockers in a cycle)
+            self._blocked(rec, self._blockers(rec), now, wait=False)
+            return None
+        return rec, f"planned order ({len(ok)} fruit): " + " → ".join(
+            str(ok[i].fruit_id) for i in order
         )
+
+    def _blockers(self, rec: FruitRecord) -> list[FruitRecord]:
+        """Fruit on the tree (seen, not known to be off it) where the tools go for ``rec``."""
+        present = [
+            r
+            for r in self.book.detected()
+            if r is not rec and r.in_scene and r.outcome not in ("harvested", "dropped")
+        ]
+        hit = blockers(
+            rec.planned,
+            [r.planned for r in present],
+            self.pose_settings,
+            self.s.neighbour_clearance_m,
+        )
+        return [present[i] for i in hit]
+
+    def _blocked(self, rec: FruitRecord, blocking: list[FruitRecord], now: int, wait: bool) -> None:
+        """``rec`` cannot be harvested now: wait for the others (once), or give it up."""
+        names = ", ".join(f"#{b.fruit_id}" for b in blocking)
+        if wait and not rec.deferred:
+            rec.deferred = True
+            why = f"blocked by {names} (in the tools' way): retried after the others"
+            self.events.append(Event("fruit_skipped", rec.fruit_id, reason=why))
+            return
+        if wait:
+            return
+        why = f"unreachable: blocked by {names} (in the tools' way)"
+        self.events.append(Event("fruit_skipped", rec.fruit_id, outcome="unreachable", reason=why))
+        self._finish(rec, now, "unreachable", why)
+        rec.finished_ns = now
 
     def _check_reach(self, rec: FruitRecord, now: int) -> bool:
         """IK of the harvest pose and the pre-pose (cached); unreachable: skipped now."""

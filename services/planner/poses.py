@@ -113,26 +113,3 @@ def plan_target(
         ),
         ignore_fruit_ids=ignore,
     )
-
-
-def under_the_dish(
-    fruit: list[FruitShape], p: PoseSettings, clearance_m: float = 0.03
-) -> list[tuple[int, int]]:
-    """Pairs (i, j): fruit i hangs where fruit j's dish goes (below j, within the dish's radius
-    plus its own and a damper's clearance horizontally, above the dish floor's depth), so i
-    should be harvested first."""
-    out = []
-    for j, fj in enumerate(fruit):
-        reach_down = basket_below_m(fj, p) - fj.d_v_m - p.security_m  # fruit centre → dish floor
-        for i, fi in enumerate(fruit):
-            if i == j:
-                continue
-            d = fi.centre_world_m - fj.centre_world_m
-            horizontal = float(np.hypot(d[0], d[1]))
-            below = -float(d[2])
-            if (
-                horizontal < TOOLS.basket_radius_m + fi.d_h_m + clearance_m
-                and 0.0 < below < reach_down + fi.d_v_m + clearance_m
-            ):
-                out.append((i, j))
-    return out

@@ -61,10 +61,15 @@ def test_plan_target_carries_the_tool_orientations_and_free_axes() -> None:
     assert hold.absolute is None and hold.relative is None
 
 
-def test_a_fruit_hanging_where_the_dish_goes_comes_first() -> None:
-    from services.planner.poses import under_the_dish
+
+def test_a_neighbour_where_the_dish_or_the_cutter_goes_blocks_a_fruit() -> None:
+    from services.planner.clutter import blockers
 
     top = FruitShape(np.array([0.7, 0.0, 1.40]), 0.04, 0.04)
     under = FruitShape(np.array([0.72, 0.05, 1.27]), 0.04, 0.04)  # where top's dish goes
     beside = FruitShape(np.array([0.7, 0.25, 1.30]), 0.04, 0.04)  # 25 cm to the side
-    assert under_the_dish([top, under, beside], P) == [(1, 0)]
+    behind = FruitShape(np.array([0.85, 0.0, 1.40]), 0.04, 0.04)  # 15 cm behind, same height
+    in_front = FruitShape(np.array([0.6, 0.0, 1.47]), 0.03, 0.03)  # on the cutter's way in
+    got = blockers(top, [under, beside, behind, in_front], P, 0.02)
+    assert got == [0, 3]
+    assert blockers(beside, [top, under, behind], P, 0.02) == []
