@@ -14,6 +14,7 @@ SERVICE_MODULES: dict[str, str] = {
     "sim": "services.sim",
     "camera_file": "services.camera_file",
     "realsense": "services.realsense",
+    "scene": "services.scene",
 }
 
 
