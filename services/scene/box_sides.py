@@ -28,6 +28,12 @@ class Sides:
     def all_good(self) -> bool:
         return all(self.good)
 
+    @property
+    def whole_pair(self) -> bool:
+        """Left and right, or top and bottom, are both silhouette: the shape is measured."""
+        lg, tg, rg, bg = self.good
+        return (lg and rg) or (tg and bg)
+
 
 def border_sides(box: tuple[float, float, float, float], width: int, height: int, margin_px: float):
     """Sides within ``margin_px`` of the image border (pixel edges are at -0.5 and W-0.5)."""

@@ -160,6 +160,12 @@ class SceneCore:
                 self.counters[f"fruit_{est.reason}"] += 1
                 failed[tr.track_id] = _failure_flag(est)
                 continue
+            if not est.sides.whole_pair and tr.track_id in self.fruits.entries:
+                # Cut on two adjacent sides (a corner): the box no longer fixes the shape; a
+                # fruit already measured keeps its state rather than take a guess.
+                self.counters["fruit_box_cut_keep_state"] += 1
+                failed[tr.track_id] = "border_cut" if any(est.sides.border) else "edge_occluded"
+                continue
             measured[tr.track_id] = self._measurement(tr.track_id, est, T)
         for note in self.fruits.step(tracks.header.stamp_ns, measured, failed):
             log.debug("%s", note)

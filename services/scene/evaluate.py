@@ -163,7 +163,7 @@ def summary(results: list[SeedResult], settings: Settings, **meta: Any) -> dict[
         "core_ms_median": _q([v for r in results for v in r.core_ms], 50),
         "flags": dict(sorted(flags.items())),
         "core_counters": dict(sorted(counters.items())),
-        "seeds": [
+        "per_seed": [
             {
                 "seed": r.seed,
                 "frames": r.frames,

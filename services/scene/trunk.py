@@ -10,8 +10,9 @@ horizontal plane, the camera-facing arc of a circle, at every height. So:
 1. mask pixels → 3D points in 'world'; binned into keys (5 mm horizontal cells × 2 cm heights,
    one key per occupied bin) so that a stack of heights counts more than a dense patch;
 2. RANSAC (seeded) over circles through three nearby keys, radius within bounds, scored by the
-   keys within ±``circle_band_m`` of the circle on its camera-facing half; a branch is a line
-   in that plane and gathers few keys on any one circle;
+   keys within ±``circle_band_m`` of the circle on its camera-facing half, less twice the keys
+   inside it (the camera cannot see into a trunk); a branch is a line in that plane and
+   gathers few keys on any one circle;
 3. a least-squares refinement on the inliers; found when enough keys over enough height agree
    and they lie on an arc centred on the direction to the camera (a cylinder shows the camera
    the half facing it; a circle fitted to branches does not look like that).
@@ -30,7 +31,8 @@ import numpy as np
 
 from services.scene.geometry import Pinhole, RigidTransform
 
-SCORE_KEYS = 600
+SCORE_CELLS = 800
+PARTNER_DRAWS = 48
 TrunkMiss = Literal["trunk_mask_empty", "trunk_too_little", "trunk_no_circle"]
 
 
@@ -48,7 +50,7 @@ class TrunkParams:
     min_keys: int = 40
     min_height_m: float = 0.15
     max_arc_offset_deg: float = 30.0
-    min_arc_deg: float = 60.0
+    min_arc_deg: float = 120.0
     ransac_iterations: int = 300
     seed: int = 0
 
@@ -61,6 +63,7 @@ class TrunkFix:
     radius_m: float | None  # None for the paper's method (it measures none)
     pixels: int  # mask pixels
     support: int  # keys that agree with the circle (pixels for the paper's method)
+    arc_deg: float = 0.0  # angular extent of the arc seen (2nd to 98th percentile), deg
 
 
 @dataclass(frozen=True)
@@ -121,7 +124,7 @@ def measure_trunk(
             n,
         )
     axis = np.array([centre[0], centre[1], float(heights.mean())])
-    return TrunkFix(axis, radius, n, int(inl.sum()))
+    return TrunkFix(axis, radius, n, int(inl.sum()), hi - lo)
 
 
 def _arc_degrees(q: np.ndarray, centre: np.ndarray, cam: np.ndarray) -> tuple[float, float, float]:
@@ -169,39 +172,78 @@ def _inliers(
     return np.asarray(near & facing)
 
 
+def _score(
+    q: np.ndarray,
+    w: np.ndarray,
+    centres: np.ndarray,
+    radii: np.ndarray,
+    cam: np.ndarray,
+    band: float,
+) -> np.ndarray:
+    """(M,) weight on each circle's camera-facing arc, less twice the weight inside it: the
+    camera cannot see into a trunk, so points inside a candidate circle speak against it (a
+    circle too large for the trunk's front arc holds the trunk's flanks inside)."""
+    on_arc = _inliers(q, centres, radii, cam, band) @ w
+    dist = np.hypot(q[None, :, 0] - centres[:, None, 0], q[None, :, 1] - centres[:, None, 1])
+    inside = (dist < radii[:, None] - band) @ w
+    return np.asarray(on_arc - 2 * inside)
+
+
+def _columns(q: np.ndarray, cell_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Horizontal cells of the keys: their mean positions and how many keys (heights) each
+    holds. A trunk is a stack of heights on one arc: its cells weigh the most."""
+    idx = np.floor(q / cell_m).astype(np.int64)
+    idx -= idx.min(axis=0)
+    flat = idx[:, 0] * (idx[:, 1].max() + 1) + idx[:, 1]
+    _, inverse, counts = np.unique(flat, return_inverse=True, return_counts=True)
+    sums = np.zeros((len(counts), 2))
+    np.add.at(sums, inverse, q)
+    return sums / counts[:, None], counts.astype(float)
+
+
 def _ransac_circle(
-    q: np.ndarray, cam: np.ndarray, p: TrunkParams
+    keys_xy: np.ndarray, cam: np.ndarray, p: TrunkParams
 ) -> tuple[np.ndarray, float, np.ndarray] | None:
-    """Best camera-facing circle through the keys' horizontal positions, refined."""
+    """Best camera-facing circle through the keys' horizontal positions, refined; returns its
+    centre, radius and which keys lie on its arc."""
+    q, w = _columns(keys_xy, p.key_cell_m)
     n = len(q)
     if n < 3:
         return None
     rng = np.random.default_rng(p.seed)
-    first = rng.integers(0, n, p.ransac_iterations)
-    # Partners near the first point: the visible arc spans at most a diameter.
-    order = np.argsort(q[:, 0] + 1e-3 * q[:, 1])
-    pos = np.empty(n, np.int64)
-    pos[order] = np.arange(n)
-    picks = []
-    for _ in range(2):
-        off = rng.integers(-60, 61, p.ransac_iterations)
-        picks.append(order[np.clip(pos[first] + off, 0, n - 1)])
-    centres, radii = _circles(q[first], q[picks[0]], q[picks[1]])
+    # Triples drawn in proportion to the cells' weights, the partners within a diameter of the
+    # first (a visible arc is no wider): the first two of PARTNER_DRAWS weighted draws that are.
+    prob = w / w.sum()
+    first = rng.choice(n, p.ransac_iterations, p=prob)
+    cand = rng.choice(n, (p.ransac_iterations, PARTNER_DRAWS), p=prob)
+    d = np.hypot(q[cand, 0] - q[first, None, 0], q[cand, 1] - q[first, None, 1])
+    near = (d < 2 * p.max_radius_m) & (d > p.key_cell_m)
+    second = np.argmax(near, axis=1)
+    near[np.arange(len(first)), second] = False
+    third = np.argmax(near, axis=1)
+    usable = near.any(axis=1)  # a second neighbour remained after taking the first
+    first, second, third = first[usable], cand[usable, second[usable]], cand[usable, third[usable]]
+    centres, radii = _circles(q[first], q[second], q[third])
     ok = np.isfinite(radii) & (radii >= p.min_radius_m) & (radii <= p.max_radius_m)
     if not ok.any():
         return None
     centres, radii = centres[ok], radii[ok]
-    # Score on at most SCORE_KEYS keys (evenly spread): the ranking needs no more.
-    sub = q[:: max(1, n // SCORE_KEYS)]
-    best = int(np.argmax(_inliers(sub, centres, radii, cam, p.circle_band_m).sum(axis=1)))
+    # Rank the candidates on at most SCORE_CELLS cells (an even spread): enough to rank them.
+    k = max(1, n // SCORE_CELLS)
+    scores = _score(q[::k], w[::k], centres, radii, cam, p.circle_band_m)
+    best = int(np.argmax(scores))
     centre, radius = centres[best], float(radii[best])
-    for _ in range(2):  # refine on the inliers, then take the inliers of the refined circle
-        inl = _inliers(q, centre[None], np.array([radius]), cam, p.circle_band_m)[0]
-        refined = _fit_circle(q[inl], centre, radius)
+    score = float(_score(q, w, centre[None], np.array([radius]), cam, p.circle_band_m)[0])
+    for _ in range(2):  # refine on the arc's keys while that explains the keys better
+        inl = _inliers(keys_xy, centre[None], np.array([radius]), cam, p.circle_band_m)[0]
+        refined = _fit_circle(keys_xy[inl], centre, radius)
         if refined is None or not (p.min_radius_m <= refined[1] <= p.max_radius_m):
             break
-        centre, radius = refined
-    inl = _inliers(q, centre[None], np.array([radius]), cam, p.circle_band_m)[0]
+        new = float(_score(q, w, refined[0][None], np.array([refined[1]]), cam, p.circle_band_m)[0])
+        if new < score:
+            break
+        (centre, radius), score = refined, new
+    inl = _inliers(keys_xy, centre[None], np.array([radius]), cam, p.circle_band_m)[0]
     return centre, radius, inl
 
 
