@@ -2,8 +2,13 @@
 fruit and the trunk, keeps the persistent list, and answers with exactly one SceneState.
 
 Frames (camera/rgbd) wait in a small buffer keyed by seq; a Tracks message names its frame by
-``frame_seq`` and the stamps must match. A Tracks message whose frame is not there still gets
-its answer: the last state, unchanged, with ``input_problem`` saying why (and counted).
+``frame_seq`` and the stamps must match. The bus keeps order per key, not across keys: a frame
+can arrive just after the Tracks message made from it (a 1.5 MB frame vs a small message). A
+Tracks message newer than every frame received so far therefore waits for its frame and is
+answered when it comes, so the answer does not depend on that race. A Tracks message whose
+frame will not come (a newer frame arrived, or it is older than the newest frame and not in
+the buffer) is answered at once: the last state, unchanged, ``input_problem`` saying why
+(counted). At most ``frame_buffer`` Tracks messages wait; past that the oldest is answered so.
 """
 
 from __future__ import annotations
@@ -80,6 +85,8 @@ class SceneCore:
             )
         )
         self.frames: OrderedDict[int, RgbdFrame] = OrderedDict()
+        self.newest_frame_ns: int | None = None
+        self.waiting: list[Tracks] = []  # Tracks newer than every frame received so far
         self.ratios: dict[int, deque[float]] = {}
         self.T: RigidTransform | None = None  # the last frame's pose
         self.trunk_pixels = 0
@@ -90,17 +97,27 @@ class SceneCore:
     def handle(self, topic: str, msg: Any) -> list[Output]:
         if topic == "camera/rgbd":
             self._keep_frame(msg)
-            return []
+            # Tracks that waited for this frame (or for one that will not come now) are due.
+            due = [t for t in self.waiting if t.header.stamp_ns <= msg.header.stamp_ns]
+            self.waiting = [t for t in self.waiting if t.header.stamp_ns > msg.header.stamp_ns]
+            return [(TOPIC_OUT, self._answer(t)) for t in due]
         if topic == "harvest/events":
             self._take_event(msg)
             return []
         if topic == "perception/tracks":
+            if self.newest_frame_ns is None or msg.header.stamp_ns > self.newest_frame_ns:
+                self.waiting.append(msg)  # its frame may still be on the way
+                self.counters["tracks_before_frame"] += 1
+                if len(self.waiting) > self.s.frame_buffer:
+                    return [(TOPIC_OUT, self._answer(self.waiting.pop(0)))]
+                return []
             return [(TOPIC_OUT, self._answer(msg))]
         return []
 
     def _keep_frame(self, frame: RgbdFrame) -> None:
         self.frames[frame.header.seq] = frame
         self.frames.move_to_end(frame.header.seq)
+        self.newest_frame_ns = frame.header.stamp_ns
         while len(self.frames) > self.s.frame_buffer:
             self.frames.popitem(last=False)
 

@@ -107,13 +107,47 @@ def test_tracks_of_a_frame_never_seen_get_the_last_state_flagged_and_counted() -
     box = s.box()
     script = [
         ("camera/rgbd", level_frame(0, s)),
+        ("camera/rgbd", level_frame(1, s)),  # a buffer of one frame: frame 0 is gone
         ("perception/tracks", tracks(0, 0, 0, {3: box})),
-        ("perception/tracks", tracks(1, 1_000_000, 1, {3: box})),  # frame 1 never came
+        ("perception/tracks", tracks(1, 1_000_000, 1, {3: box})),
+        ("perception/tracks", tracks(2, 2_000_000, 2, {3: box})),  # frame 2 is lost...
+        ("camera/rgbd", level_frame(3, s)),  # ...which frame 3 shows: answered now
     ]
-    (a, b), node = feed(script)
-    assert a.input_problem == "" and b.input_problem.startswith("frame seq 1")
-    assert b.fruits == a.fruits and b.trunk == a.trunk
-    assert node.core.counters["frame_not_received"] == 1
+    node = FakeNode(SERVICE, load_settings(Settings, {"frame_buffer": 1}))
+    outs = node.feed(script)
+    assert [o.cause for o in outs] == [2, 3, 5]
+    a, b, c = states(outs)
+    assert a.input_problem.startswith("frame seq 0") and a.fruits == ()
+    assert b.input_problem == "" and [f.fruit_id for f in b.fruits] == [3]
+    assert c.input_problem.startswith("frame seq 2") and c.fruits == b.fruits
+    assert node.core.counters["frame_not_received"] == 2
+
+
+def test_tracks_that_overtake_their_frame_get_the_same_answer() -> None:
+    """The bus orders messages per key only: a small Tracks message can arrive before the
+    large frame it was made from. It waits for it; the answers do not change."""
+    s = fruit_scene()
+    box = s.box()
+    f0, f1 = level_frame(0, s), level_frame(1, s)
+    t0, t1 = tracks(0, 0, 0, {3: box}), tracks(1, 1_000_000, 1, {3: box})
+    in_order, _ = feed(
+        [
+            ("camera/rgbd", f0),
+            ("perception/tracks", t0),
+            ("camera/rgbd", f1),
+            ("perception/tracks", t1),
+        ]
+    )
+    overtaken, node = feed(
+        [
+            ("perception/tracks", t0),
+            ("camera/rgbd", f0),
+            ("perception/tracks", t1),
+            ("camera/rgbd", f1),
+        ]
+    )
+    assert overtaken == in_order and overtaken[0].input_problem == ""
+    assert node.core.counters["tracks_before_frame"] == 2
 
 
 def test_no_valid_depth_keeps_the_fruit_from_its_last_good_state() -> None:
