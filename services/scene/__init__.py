@@ -114,10 +114,18 @@ class Settings(ServiceSettings):
         default=(20, 130, 140), description="Trunk colour, OpenCV HSV upper bound (the paper's)."
     )
     trunk_min_pixels: int = Field(default=50, ge=1, description="Fewest mask pixels for a fix.")
-    trunk_min_radius_m: float = Field(default=0.02, gt=0, description="Smallest trunk radius, m.")
+    trunk_min_radius_m: float = Field(
+        default=0.03,
+        gt=0,
+        description="Smallest trunk radius, m (6 cm across: thinner is a branch, which also "
+        "passes the colour mask).",
+    )
     trunk_max_radius_m: float = Field(default=0.2, gt=0, description="Largest trunk radius, m.")
     trunk_min_height_m: float = Field(
-        default=0.15, gt=0, description="Height of trunk a fix must see, m."
+        default=0.4,
+        gt=0,
+        description="Height of trunk a fix must see, m: a trunk runs from the ground into the "
+        "crown, a near-vertical branch piece is shorter.",
     )
     trunk_smoothing: float = Field(
         default=0.2, gt=0, le=1, description="Gain of the exponential average over frames."

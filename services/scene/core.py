@@ -2,10 +2,11 @@
 fruit and the trunk, keeps the persistent list, and answers with exactly one SceneState.
 
 Frames (camera/rgbd) wait in a small buffer keyed by seq; a Tracks message names its frame by
-``frame_seq`` and the stamps must match. The bus keeps order per key, not across keys: a frame
-can arrive just after the Tracks message made from it (a 1.5 MB frame vs a small message). A
-Tracks message newer than every frame received so far therefore waits for its frame and is
-answered when it comes, so the answer does not depend on that race. A Tracks message whose
+``frame_seq`` and the stamps must match. Order across keys is not guaranteed (with
+zenoh-python's default of one delivery thread per subscriber, a small Tracks message was seen
+to overtake the 1.5 MB frame it was made from in a resim). A Tracks message newer than every
+frame received so far therefore waits for its frame and is answered when it comes, so the
+answer does not depend on that race. A Tracks message whose
 frame will not come (a newer frame arrived, or it is older than the newest frame and not in
 the buffer) is answered at once: the last state, unchanged, ``input_problem`` saying why
 (counted). At most ``frame_buffer`` Tracks messages wait; past that the oldest is answered so.

@@ -44,11 +44,11 @@ class TrunkParams:
     min_pixels: int = 50
     key_cell_m: float = 0.005
     key_height_m: float = 0.02
-    min_radius_m: float = 0.02
+    min_radius_m: float = 0.03
     max_radius_m: float = 0.2
     circle_band_m: float = 0.01
     min_keys: int = 40
-    min_height_m: float = 0.15
+    min_height_m: float = 0.4
     max_arc_offset_deg: float = 30.0
     min_arc_deg: float = 120.0
     ransac_iterations: int = 300
@@ -64,6 +64,7 @@ class TrunkFix:
     pixels: int  # mask pixels
     support: int  # keys that agree with the circle (pixels for the paper's method)
     arc_deg: float = 0.0  # angular extent of the arc seen (2nd to 98th percentile), deg
+    height_m: float = 0.0  # height of trunk seen (the arc's keys), m
 
 
 @dataclass(frozen=True)
@@ -124,7 +125,7 @@ def measure_trunk(
             n,
         )
     axis = np.array([centre[0], centre[1], float(heights.mean())])
-    return TrunkFix(axis, radius, n, int(inl.sum()), hi - lo)
+    return TrunkFix(axis, radius, n, int(inl.sum()), hi - lo, span)
 
 
 def _arc_degrees(q: np.ndarray, centre: np.ndarray, cam: np.ndarray) -> tuple[float, float, float]:
