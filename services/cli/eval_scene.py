@@ -30,6 +30,13 @@ def add_parser(esub: argparse._SubParsersAction) -> None:
         help="a fruit becomes a track when this share of it is visible (0.5)",
     )
     p.add_argument(
+        "--box-noise-px",
+        type=float,
+        default=0.0,
+        help="move each box edge by seeded Gaussian noise of this σ, px (a detector's boxes "
+        "are not pixel-exact; default 0)",
+    )
+    p.add_argument(
         "--set", action="append", metavar="KEY=VALUE", help="scene setting, e.g. fruit_method=paper"
     )
     p.add_argument(
@@ -57,8 +64,8 @@ def cmd_eval_scene(args: argparse.Namespace) -> int:
     from services.sim.scenario import ScenarioError
 
     err = console(stderr=True)
-    if not (args.seconds > 0 and 0 < args.min_visible <= 1):
-        err.print("[red]--seconds must be > 0 and --min-visible in (0, 1][/]")
+    if not (args.seconds > 0 and 0 < args.min_visible <= 1 and args.box_noise_px >= 0):
+        err.print("[red]--seconds must be > 0, --min-visible in (0, 1], --box-noise-px >= 0[/]")
         return 2
     try:
         settings = load_settings(Settings, {}, parse_overrides(args.set), service="scene")
@@ -87,6 +94,7 @@ def cmd_eval_scene(args: argparse.Namespace) -> int:
                     settings,  # type: ignore[arg-type]
                     args.min_visible,
                     on_frame=lambda: bar.advance(task),
+                    box_noise_px=args.box_noise_px,
                 )
             except (ScenarioError, ValueError) as exc:
                 err.print(f"[red]{args.scenario} seed {seed}: {exc}[/]")
@@ -99,6 +107,7 @@ def cmd_eval_scene(args: argparse.Namespace) -> int:
         seeds=args.seeds,
         seconds_per_seed=args.seconds,
         min_visible=args.min_visible,
+        box_noise_px=args.box_noise_px,
         tracks=args.tracks,
     )
     if args.json:
@@ -120,7 +129,8 @@ def print_table(out: dict) -> None:
     from rich.table import Table
 
     con = console()
-    t = Table(title=f"scene vs sim/truth: {out['scenario']}, seeds {_seeds(out['seeds'])}")
+    noise = f", box noise σ {out['box_noise_px']} px" if out["box_noise_px"] else ""
+    t = Table(title=f"scene vs sim/truth: {out['scenario']}, seeds {_seeds(out['seeds'])}{noise}")
     t.add_column("figure")
     t.add_column("value", justify="right")
     t.add_column("goal", justify="right")

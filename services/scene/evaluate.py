@@ -55,6 +55,7 @@ def evaluate_seed(
     min_visible: float = 0.5,
     range_m: tuple[float, float] = (0.4, 1.0),
     on_frame: Callable[[], None] | None = None,
+    box_noise_px: float = 0.0,
 ) -> SeedResult:
     """Run one seed of ``scenario`` for ``seconds`` of sim time and score every frame."""
     from services.runtime.settings import load_settings
@@ -70,7 +71,7 @@ def evaluate_seed(
         )
     )
     core = SceneCore(settings)
-    oracle = TruthTracks(min_visible)
+    oracle = TruthTracks(min_visible, box_noise_px, seed)
     res = SeedResult(scenario, seed)
     try:
         while not sim.done():

@@ -17,10 +17,15 @@ d_h along camera x, y, z) and measures it more carefully:
    fruit's height/width ratio (its own, measured earlier, or a prior).
 2. *Scale from every pixel of the visible surface.* For each valid, fruit-coloured pixel in the
    central part of the ellipse, the ray hits the unit-scale ellipsoid at depth ζ; its measured
-   depth z gives a scale z/ζ. The median, then the mean of the inliers around it, is the
-   centre depth. This uses hundreds of pixels instead of one (the D435's noise grows as z²),
-   corrects the curvature of the front surface exactly, and rejects depths that do not fit the
-   surface the box predicts (a leaf or a hand in front, holes, a neighbour behind).
+   depth z gives a scale z/ζ. The farthest well-supported cluster of these scales (whatever
+   hides part of the fruit is nearer than it), then the mean within 3 MADs of its median, is
+   the centre depth. This uses hundreds of pixels instead of one (the D435's noise grows as
+   z²), corrects the curvature of the front surface exactly, and rejects depths that do not fit
+   the surface the box predicts (a leaf, a hand or an arm in front, holes).
+3. *Which sides are cut.* Something nearer just beyond a side may cut the fruit there, or only
+   touch it (a neighbour). Every combination of such sides is fitted; the fit that contradicts
+   the image least (``ellipsoid.misfit``: background where it puts fruit, fruit where it puts
+   background) is kept.
 """
 
 from __future__ import annotations
