@@ -13,9 +13,10 @@ horizontal plane, the camera-facing arc of a circle, at every height. So:
    keys within ±``circle_band_m`` of the circle on its camera-facing half, less twice the keys
    inside it (the camera cannot see into a trunk); a branch is a line in that plane and
    gathers few keys on any one circle;
-3. a least-squares refinement on the inliers; found when enough keys over enough height agree
-   and they lie on an arc centred on the direction to the camera (a cylinder shows the camera
-   the half facing it; a circle fitted to branches does not look like that).
+3. a least-squares refinement on the inliers; found when enough keys over enough height
+   (0.4 m) agree and they span an arc of at least 120° centred on the direction to the camera
+   (a cylinder shows the camera the half facing it; a circle fitted to branches, or one too
+   large for a half-hidden trunk's arc, sees much less of itself).
 
 P_t is the circle's centre (on the axis) at the mean height of its inliers; the trunk radius is
 the circle's. The camera is nearly level (8° pitch), so the paper's "cylinder along the camera's
