@@ -31,6 +31,11 @@ class HarvestEvent(Message):
     phase_from: str = Field(default="", description="Phase before the transition.")
     phase_to: str = Field(default="", description="Phase after the transition.")
     reason: str = Field(default="", description="Why, in words (e.g. the skip reason).")
+    outcome: FruitOutcome | None = Field(
+        default=None,
+        description="The fruit's outcome when this event settles it (fruit_skipped: "
+        "'unreachable' marks the fruit unreachable in scene/state).",
+    )
 
 
 class FruitResult(Frozen):

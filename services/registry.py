@@ -15,6 +15,7 @@ SERVICE_MODULES: dict[str, str] = {
     "camera_file": "services.camera_file",
     "realsense": "services.realsense",
     "controller": "services.controller",
+    "scene": "services.scene",
 }
 
 
