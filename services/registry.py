@@ -16,6 +16,7 @@ SERVICE_MODULES: dict[str, str] = {
     "realsense": "services.realsense",
     "controller": "services.controller",
     "planner": "services.planner",
+    "scene": "services.scene",
 }
 
 
