@@ -17,6 +17,8 @@ SERVICE_MODULES: dict[str, str] = {
     "controller": "services.controller",
     "detector": "services.detector",
     "tracker": "services.tracker",
+    "planner": "services.planner",
+    "scene": "services.scene",
 }
 
 
