@@ -82,6 +82,29 @@ class Settings(ServiceSettings):
     fruit_hsv_high: HsvTriple = Field(
         default=(30, 255, 255), description="Fruit colour, OpenCV HSV upper bound (inclusive)."
     )
+    min_colour_share: float = Field(
+        default=0.15,
+        ge=0,
+        le=1,
+        description="Fewest fruit-coloured pixels, as a share of the box's valid depth pixels, "
+        "for an estimate: a detection on a hand, a branch or a leaf is not a fruit.",
+    )
+    # ---- the robot self-filter ---------------------------------------------------------------
+    robot_self_filter: bool = Field(
+        default=True,
+        description="Drop a fruit estimate that lies inside the robot's own arms or tools (the "
+        "LWR's orange links look like oranges): capsules at the joint state of the frame's "
+        "stamp. Once a joint state has been received, a Tracks message waits for the joint "
+        "state of its frame.",
+    )
+    self_filter_share: float = Field(
+        default=0.5,
+        ge=0,
+        le=2,
+        description="An estimate whose centre is closer to a link's axis than the link radius "
+        "plus this share of its d_h is the robot itself (a real fruit touching the link is a "
+        "whole d_h out).",
+    )
     # ---- the persistent list (paper §III-B) --------------------------------------------------
     update_threshold_m: float = Field(
         default=0.04,
@@ -148,7 +171,7 @@ class Settings(ServiceSettings):
 
 
 SPEC = NodeSpec(
-    inputs=("camera/rgbd", "perception/tracks", "harvest/events"),
+    inputs=("camera/rgbd", "robot/joint_state", "perception/tracks", "harvest/events"),
     outputs=("scene/state",),
     answers={"perception/tracks": ("scene/state",)},
 )

@@ -49,7 +49,11 @@ from services.scene.ellipsoid import (
 from services.scene.geometry import Pinhole
 
 FailureReason = Literal[
-    "box_degenerate", "box_outside_image", "depth_invalid", "depth_inconsistent"
+    "box_degenerate",
+    "box_outside_image",
+    "depth_invalid",
+    "depth_inconsistent",
+    "not_fruit_coloured",
 ]
 
 
@@ -71,6 +75,7 @@ class FruitParams:
     max_semi_axis_m: float = 0.12
     fruit_hsv_low: tuple[int, int, int] = (0, 140, 50)
     fruit_hsv_high: tuple[int, int, int] = (30, 255, 255)
+    min_colour_share: float = 0.15
 
 
 @dataclass(frozen=True)
@@ -123,6 +128,13 @@ def estimate_fruit(
     if p.method == "paper":
         return _paper(box, depth_m, K, p, border)
     win = _Window.around(box, K, depth_m, hsv, p, 0.0)
+    valid_in_box = int((win.valid & win.in_box).sum())
+    if hsv is not None and win.coloured_in_box < p.min_colour_share * valid_in_box:
+        # A box on a hand, a branch or a leaf: the detector is not perfect, the colour says so.
+        return EstimateFailure(
+            "not_fruit_coloured",
+            f"{win.coloured_in_box} of {valid_in_box} valid pixels in box {box} are fruit-coloured",
+        )
     pool = win.in_box & (win.coloured if win.coloured_in_box >= p.min_pixels else win.valid)
     if int(pool.sum()) < p.min_pixels:
         return EstimateFailure("depth_invalid", f"fewer than {p.min_pixels} valid depths in box")
