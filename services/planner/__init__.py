@@ -91,11 +91,13 @@ class Settings(ServiceSettings):
         default=0.3, gt=0, description="No progress this long: the tools have settled, s."
     )
     neighbour_clearance_m: float = Field(
-        default=0.02,
+        default=0.01,
         ge=0,
         description="Reachability in clutter: a neighbour closer than this to where the dish or "
-        "the cutter goes (harvest pose, and the move from the pre-pose) blocks the fruit; the "
-        "controller's fruit damper keeps its d_s (2 cm) from every fruit, m.",
+        "the cutter goes (harvest pose, and the move from the pre-pose) blocks the fruit, m. The "
+        "controller's fruit damper keeps d_s (2 cm) from every fruit, but the hulls are already "
+        "conservative and the scene's d_h from a detector's box runs a few mm large: 2 cm "
+        "blocked fruit that real runs harvest.",
     )
     defer_blocked: bool = Field(
         default=True,

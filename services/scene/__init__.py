@@ -162,6 +162,14 @@ class Settings(ServiceSettings):
     trunk_forget_after_frames: int = Field(
         default=100, ge=1, description="Frames without a fix after which the trunk is not found."
     )
+    trunk_tool_margin_m: float = Field(
+        default=0.08,
+        ge=0,
+        le=1,
+        description="The trunk obstacle's surface passes this far behind the selected fruit's "
+        "back (the paper: 0): the collecting dish, centred under the fruit, reaches 4.5 cm past "
+        "it and the damper keeps d_s more, m.",
+    )
     trunk_default_radius_m: float = Field(
         default=0.08,
         gt=0,

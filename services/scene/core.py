@@ -44,6 +44,7 @@ log = logging.getLogger("scene")
 TOPIC_OUT = "scene/state"
 RATIO_HISTORY = 15  # whole-box views whose median d_v/d_h a fruit keeps
 HARVESTED_EVENTS = ("fruit_collected", "fruit_dropped")
+TARGET_ENDS = (*HARVESTED_EVENTS, "fruit_skipped", "fruit_lost")
 JOINT_BUFFER = 256  # joint states kept (120 Hz: ~2 s, the frame buffer's span at 15 Hz and more)
 
 
@@ -94,6 +95,7 @@ class SceneCore:
                 s.trunk_forget_after_frames,
             )
         )
+        self.target: int | None = None  # the planner's current fruit (harvest/events)
         self.body = RobotBody() if s.robot_self_filter else None
         self.joints: OrderedDict[int, JointState] = OrderedDict()  # stamp → joint state
         self.newest_joint_ns: int | None = None
@@ -161,8 +163,20 @@ class SceneCore:
             self.frames.popitem(last=False)
 
     def _take_event(self, ev: HarvestEvent) -> None:
+        if ev.event == "run_finished":
+            self.target = None
         if ev.fruit_id is None:
             return
+        # The obstacle radius is the paper's for the fruit being harvested: follow the planner's
+        # target (its order may differ from nearest-first), across its ID switches.
+        if ev.event == "fruit_selected" or (ev.event == "replanned" and self.target is not None):
+            self.target = ev.fruit_id
+        elif ev.fruit_id == self.target and ev.event in (
+            *HARVESTED_EVENTS,
+            "fruit_skipped",
+            "fruit_lost",
+        ):
+            self.target = None
         if ev.event in HARVESTED_EVENTS:
             self.fruits.mark(ev.fruit_id, "harvested")
             self.counters["mark_harvested"] += 1
@@ -294,12 +308,17 @@ class SceneCore:
     # ---- output --------------------------------------------------------------------------------
     def _state(self, tracks: Tracks, problem: str) -> SceneState:
         entries = self.fruits.sorted_entries()
-        selected_id = self.fruits.selected()
+        selected_id = self.fruits.selected(self.target)
         selected = self.fruits.entries.get(selected_id) if selected_id is not None else None
         fruits = tuple(self._fruit(e, selected_id) for e in entries)
         harvested = {k for k, m in self.fruits.marks.items() if m == "harvested"}
         obstacles = build_obstacles(
-            entries, harvested, self.trunk.state, selected, self.s.trunk_default_radius_m
+            entries,
+            harvested,
+            self.trunk.state,
+            selected,
+            self.s.trunk_default_radius_m,
+            self.s.trunk_tool_margin_m,
         )
         return SceneState(
             header=self.stamper.answer(TOPIC_OUT, tracks.header, frame_id="world"),

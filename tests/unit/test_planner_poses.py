@@ -61,7 +61,6 @@ def test_plan_target_carries_the_tool_orientations_and_free_axes() -> None:
     assert hold.absolute is None and hold.relative is None
 
 
-
 def test_a_neighbour_where_the_dish_or_the_cutter_goes_blocks_a_fruit() -> None:
     from services.planner.clutter import blockers
 

@@ -89,3 +89,35 @@ def test_a_box_on_a_skin_coloured_hand_is_not_a_fruit() -> None:
     assert n == 0 and core.counters["fruit_not_fruit_coloured"] == 1
     core, n = run(s, s.box(), with_joints=False, min_colour_share=0.0)
     assert n == 1
+
+
+def test_the_obstacle_radius_follows_the_planners_target() -> None:
+    from schemas.harvest import HarvestEvent
+
+    s = Scene()
+    s.ellipsoid((-0.1, 0.0, 0.5), a=0.04, c=0.04, label=1)
+    s.ellipsoid((0.1, 0.0, 0.8), a=0.04, c=0.04, label=2)
+    s.vertical_cylinder((1.2, 0.0), 0.06)
+    core = SceneCore(load_settings(Settings, {}))
+
+    def step(stamp: int) -> object:
+        core.handle("camera/rgbd", s.frame(seq=stamp, stamp_ns=stamp))
+        boxes = {1: s.box(1), 2: s.box(2)}
+        ((_, state),) = core.handle("perception/tracks", tracks(stamp, stamp, stamp, boxes))
+        return state
+
+    assert step(1).selected_fruit_id == 1  # nearest first (the paper)
+    ev = HarvestEvent(
+        header=Header(stamp_ns=2, seq=0, source="planner"), event="fruit_selected", fruit_id=2
+    )
+    core.handle("harvest/events", ev)
+    st = step(3)
+    assert st.selected_fruit_id == 2
+    far = st.fruits[1]
+    axis = st.obstacles.cylinders[0].axis_point_world_m
+    horizontal = np.hypot(far.position_world_m[0] - axis[0], far.position_world_m[1] - axis[1])
+    expected = horizontal - far.semi_axis_h_m - core.s.trunk_tool_margin_m
+    assert abs(st.obstacles.cylinders[0].radius_m - expected) < 1e-9
+    done = ev.model_copy(update={"event": "fruit_collected", "outcome": "harvested"})
+    core.handle("harvest/events", done)
+    assert step(4).selected_fruit_id == 1
