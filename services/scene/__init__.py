@@ -82,6 +82,11 @@ class Settings(ServiceSettings):
     fruit_hsv_high: HsvTriple = Field(
         default=(30, 255, 255), description="Fruit colour, OpenCV HSV upper bound (inclusive)."
     )
+    refine_box: bool = Field(
+        default=True,
+        description="Shrink each track's box to the fruit-coloured pixels at the fruit's depth "
+        "inside it before measuring (a detector's boxes are a few pixels loose).",
+    )
     min_colour_share: float = Field(
         default=0.15,
         ge=0,

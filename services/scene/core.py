@@ -76,6 +76,7 @@ class SceneCore:
             fruit_hsv_low=s.fruit_hsv_low,
             fruit_hsv_high=s.fruit_hsv_high,
             min_colour_share=s.min_colour_share,
+            refine_box=s.refine_box,
         )
         self.trunk_params = TrunkParams(
             method=s.trunk_method,
