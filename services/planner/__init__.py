@@ -51,6 +51,14 @@ class Settings(ServiceSettings):
         description="Gap between the dish rim and the fruit bottom; the dish centre is "
         "d_s + 2 d_v + rim height + this under the cutter tip.",
     )
+    dish_back_m: float = Field(
+        default=0.03,
+        ge=0,
+        le=0.06,
+        description="At the harvest pose the dish centre sits this far back from under the fruit, "
+        "towards the robot (along the cutter's pointing axis): a falling 4 cm fruit still lands "
+        "in the 8.5 cm dish, and fruit hanging behind and below stay out of its way, m.",
+    )
     approach_basket_drop_m: float = Field(
         default=0.05,
         ge=0,

@@ -29,6 +29,7 @@ DISH_HEIGHT_M = TOOLS.basket_rim_height_m + TOOLS.basket_floor_m
 SHAFT_M = TOOLS.cutter_shaft_length_m + TOOLS.flange_gap_m  # tip → flange
 WRIST_M = 0.08  # the last link behind the flange
 SWEEP_SAMPLES = 7
+SAME_FRUIT_SHARE = 0.8  # centres closer than this share of d_h + d_h: one fruit, two tracks
 
 
 def _to_cylinder_m(p: np.ndarray, floor: np.ndarray) -> float:
@@ -55,12 +56,15 @@ def blockers(
     out = []
     for i, f in enumerate(others):
         c = f.centre_world_m
+        if np.linalg.norm(c - target.centre_world_m) < SAME_FRUIT_SHARE * (f.d_h_m + target.d_h_m):
+            continue  # two fruit cannot overlap: a second track of the target itself
         r = max(f.d_h_m, f.d_v_m) + clearance_m
         hit = False
         for t in np.linspace(0.0, 1.0, SWEEP_SAMPLES):
             tip = q.tip_world_m + t * (h.tip_world_m - q.tip_world_m)
             below = q.basket_below_m + t * (h.basket_below_m - q.basket_below_m)
-            if _to_cylinder_m(c, tip - below * down) < r:
+            back = q.basket_back_m + t * (h.basket_back_m - q.basket_back_m)
+            if _to_cylinder_m(c, tip - below * down - back * axis) < r:
                 hit = True
                 break
             flange = tip - SHAFT_M * axis

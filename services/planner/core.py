@@ -47,6 +47,7 @@ class PlannerCore:
                 s.basket_clearance_m,
                 s.approach_basket_drop_m,
                 self.kin.camera_axis_world,
+                s.dish_back_m,
             ),
         )
         self.stamper = Stamper(NAME)

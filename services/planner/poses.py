@@ -45,6 +45,7 @@ class ToolPoses:
     tip_world_m: np.ndarray
     basket_below_m: float
     R_world_cutter: np.ndarray | None = None
+    basket_back_m: float = 0.0  # dish centre back along the cutter's pointing axis (−z), m
 
 
 @dataclass(frozen=True)
@@ -56,6 +57,7 @@ class PoseSettings:
     basket_clearance_m: float
     approach_basket_drop_m: float
     camera_axis_world: np.ndarray  # unit vector: the camera's +z (optical axis) in the world
+    dish_back_m: float = 0.0
 
 
 def basket_below_m(f: FruitShape, p: PoseSettings) -> float:
@@ -64,9 +66,11 @@ def basket_below_m(f: FruitShape, p: PoseSettings) -> float:
 
 
 def harvest_pose(f: FruitShape, p: PoseSettings) -> ToolPoses:
-    """x_a: the tip d_v + d_s above the fruit centre (on the peduncle)."""
+    """x_a: the tip d_v + d_s above the fruit centre (on the peduncle); the dish under it,
+    ``dish_back_m`` towards the robot (it still catches the fruit, and keeps clear of fruit
+    hanging behind)."""
     tip = f.centre_world_m + np.array([0.0, 0.0, f.d_v_m + p.security_m])
-    return ToolPoses(tip, basket_below_m(f, p))
+    return ToolPoses(tip, basket_below_m(f, p), basket_back_m=p.dish_back_m)
 
 
 def pre_pose(f: FruitShape, p: PoseSettings) -> ToolPoses:
@@ -76,6 +80,7 @@ def pre_pose(f: FruitShape, p: PoseSettings) -> ToolPoses:
     return ToolPoses(
         h.tip_world_m - p.approach_m * p.camera_axis_world,
         h.basket_below_m + p.approach_basket_drop_m,
+        basket_back_m=h.basket_back_m,
     )
 
 
@@ -107,7 +112,7 @@ def plan_target(
             free_axis="x",
         ),
         relative=RelativeTarget(
-            position_m=(float(poses.basket_below_m), 0.0, 0.0),
+            position_m=(float(poses.basket_below_m), 0.0, -float(poses.basket_back_m)),
             orientation_xyzw=Q_BASKET_IN_CUTTER,
             free_axis="z",
         ),
