@@ -99,13 +99,14 @@ class Settings(ServiceSettings):
         default=0.3, gt=0, description="No progress this long: the tools have settled, s."
     )
     neighbour_clearance_m: float = Field(
-        default=0.01,
+        default=0.0,
         ge=0,
         description="Reachability in clutter: a neighbour closer than this to where the dish or "
         "the cutter goes (harvest pose, and the move from the pre-pose) blocks the fruit, m. The "
         "controller's fruit damper keeps d_s (2 cm) from every fruit, but the hulls are already "
-        "conservative and the scene's d_h from a detector's box runs a few mm large: 2 cm "
-        "blocked fruit that real runs harvest.",
+        "conservative (the dish hull, the fruit's largest semi-axis) and the scene's estimates "
+        "are off by a few mm: any margin here blocked fruit that the arms do reach (a near miss "
+        "costs a 'no progress' retry, not a collision: the controller's dampers keep d_s), m.",
     )
     defer_blocked: bool = Field(
         default=True,

@@ -64,7 +64,11 @@ class Settings(ServiceSettings):
         default=1.0, ge=0, le=20, description="A box side this near the image border is cut, px."
     )
     min_semi_axis_m: float = Field(
-        default=0.015, gt=0, description="Smallest plausible fruit semi-axis d_h, m."
+        default=0.025,
+        gt=0,
+        description="Smallest plausible fruit semi-axis d_h, m (oranges: 3-5 cm radius). A "
+        "smaller estimate is a partial view (a fruit mostly hidden, a box on a part of it): "
+        "refused, the fruit keeps its state.",
     )
     max_semi_axis_m: float = Field(
         default=0.12, gt=0, description="Largest plausible fruit semi-axis d_h, m."
@@ -109,6 +113,11 @@ class Settings(ServiceSettings):
         description="An estimate whose centre is closer to a link's axis than the link radius "
         "plus this share of its d_h is the robot itself (a real fruit touching the link is a "
         "whole d_h out).",
+    )
+    prefer_whole_views: bool = Field(
+        default=True,
+        description="A fruit whose stored state comes from a whole view (no side cut) keeps it "
+        "against views with a side cut by an occluder or the border.",
     )
     # ---- the persistent list (paper §III-B) --------------------------------------------------
     update_threshold_m: float = Field(

@@ -232,6 +232,13 @@ class SceneCore:
                 self.counters[f"fruit_{est.reason}"] += 1
                 failed[tr.track_id] = _failure_flag(est)
                 continue
+            if self._keep_whole_view(tr.track_id, est):
+                # A side cut (an arm or a hand passing, leaves) while a whole view of this fruit
+                # is stored: the whole view is the better estimate (a cut view guesses the
+                # missing semi-axis; during a harvest the arms cut every neighbour's box).
+                self.counters["fruit_cut_view_keep_state"] += 1
+                failed[tr.track_id] = "border_cut" if any(est.sides.border) else "edge_occluded"
+                continue
             if not est.sides.whole_pair and tr.track_id in self.fruits.entries:
                 # Cut on two adjacent sides (a corner): the box no longer fixes the shape; a
                 # fruit already measured keeps its state rather than take a guess.
@@ -287,6 +294,18 @@ class SceneCore:
         radii = np.array([r for _a, _b, r in robot])
         reach = radii + self.s.self_filter_share * m.semi_axis_h_m
         return bool((axis_distances_m(m.position_world_m, robot) < reach).any())
+
+    def _keep_whole_view(self, fid: int, est: FruitEstimate) -> bool:
+        """A cut view of a fruit whose whole view is stored (it has whole-view ratios and the
+        stored state came from one)."""
+        e = self.fruits.entries.get(fid)
+        return (
+            self.s.prefer_whole_views
+            and not est.sides.all_good
+            and e is not None
+            and fid in self.ratios
+            and not e.state.flags
+        )
 
     def _v_over_h(self, fid: int) -> float:
         r = self.ratios.get(fid)
