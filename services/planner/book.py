@@ -46,6 +46,7 @@ class FruitRecord:
     cuts: int = 0
     losses: int = 0
     frozen: bool = False  # cutting or leaving: the planning position no longer follows the scene
+    planned_whole: bool = False  # ``planned`` comes from a whole view (no side cut, fresh)
     reach: tuple[ReachVerdict, ReachVerdict] | None = None  # harvest pose, pre-pose
 
     @property
@@ -104,7 +105,9 @@ class FruitBook:
                 self.id_to_key[f.fruit_id] = key
                 rec.ids.append(f.fruit_id)
                 return key
-        self.records[f.fruit_id] = FruitRecord(f.fruit_id, f.fruit_id, [f.fruit_id], f, shape_of(f))
+        self.records[f.fruit_id] = FruitRecord(
+            f.fruit_id, f.fruit_id, [f.fruit_id], f, shape_of(f), planned_whole=_whole(f)
+        )
         self.id_to_key[f.fruit_id] = f.fruit_id
         return f.fruit_id
 
@@ -118,12 +121,17 @@ class FruitBook:
             return
         if f.frames_unseen == 0 and in_dish(f):
             rec.in_basket = True
+        whole = _whole(f)
+        if rec.planned_whole and not whole:
+            return  # a cut or stale view does not move a target planned from a whole one
         shape = shape_of(f)
         d = float(np.linalg.norm(shape.centre_world_m - rec.planned.centre_world_m))
-        if d > self.replan_m:
+        if d > self.replan_m or (whole and not rec.planned_whole):
             rec.planned = shape
             rec.reach = None
-            self.moved.append((rec.key, d))
+            rec.planned_whole = whole
+            if d > self.replan_m:
+                self.moved.append((rec.key, d))
 
     def candidates(self, max_unseen: int) -> list[FruitRecord]:
         """Records still to do, in the scene, seen recently, not in the basket, by key; fruit
@@ -153,6 +161,11 @@ class FruitBook:
     def detected(self) -> list[FruitRecord]:
         """Every physical fruit seen on the tree (fruit seen only in the basket left out)."""
         return [r for _, r in sorted(self.records.items()) if not r.in_basket]
+
+
+def _whole(f: Fruit) -> bool:
+    """A fresh estimate with no side cut (the scene's flags): the best the scene gives."""
+    return not f.flags and f.frames_unseen == 0
 
 
 def inside_dish(p_world_m: np.ndarray, dish: DishPose, margin_m: float) -> bool:
