@@ -1,7 +1,8 @@
 """The whole harvest as real processes (sim → detector → tracker → scene → planner → controller
 → sim) under the supervisor, in lock-step, recorded: a one-fruit tree is harvested; two runs of
 the same scenario and seed are byte-identical on every topic; resim of every service on the
-recording reproduces every output. (Slow: ~1-2 min per run on 2 cores.)"""
+recording reproduces every output (two groups: the perception chain, the control loop).
+(Slow: ~1 min per run on 2 cores.)"""
 
 from __future__ import annotations
 
@@ -10,13 +11,13 @@ from pathlib import Path
 import pytest
 
 from schemas.topics import TOPICS
+from services.registry import service_def
 from services.replay.resim import resim
 from tests.harvest_helpers import lab_scenario
 from tests.helpers import harvest, payloads_by_topic, short_dir
 
 pytestmark = pytest.mark.integration
 
-SERVICES = ("detector", "tracker", "scene", "controller", "planner")
 FRUIT = {"position_world_m": [0.6, -0.12, 1.32], "radius_m": 0.04, "leaf_cover": "none"}
 
 
@@ -80,8 +81,22 @@ def test_two_runs_are_byte_identical_on_every_topic(runs: tuple[Path, Path]) -> 
         assert diff is None, f"{topic}: message {diff} differs"
 
 
-def test_resim_of_every_service_is_identical(runs: tuple[Path, Path]) -> None:
-    report = resim(runs[0], list(SERVICES), timeout_s=300.0)
+@pytest.mark.parametrize(
+    "group",
+    [("detector", "tracker", "scene"), ("controller", "planner")],
+    ids=["perception", "control"],
+)
+def test_resim_of_every_service_is_identical(
+    runs: tuple[Path, Path], group: tuple[str, ...]
+) -> None:
+    # Every service is resimmed, in two groups: the perception chain on the recorded frames, the
+    # control loop on the recorded scene states. (All five at once: the controller may take a
+    # joint state from the player before the resimmed scene's state of the same tick — a
+    # delivery-order race the live run does not have; see the issue notes.)
+    report = resim(runs[0], list(group), timeout_s=300.0)
     assert report.ok and report.identical_ratio == 1.0, report.to_json()
     by = {t.topic: t for t in report.topics}
-    assert by["scene/state"].identical > 0 and by["plan/target"].identical > 0
+    for d in group:
+        for topic in service_def(d).spec.outputs:
+            if topic in by and TOPICS[topic].deterministic:
+                assert by[topic].identical > 0 and by[topic].different == 0, (d, by[topic])
