@@ -65,8 +65,9 @@ class ToolCommand(Message):
 
 
 class BasketState(Message):
-    """The collecting tool's load cell (robot/basket): the load in the dish, and how many fruit
-    have settled in it so far (the sensor's step detector: a load step that stays ≥ 0.25 s)."""
+    """The collecting tool's load cell (robot/basket): the load in the dish and fruit settled."""
+
+    # fruit_count comes from the sensor's step detector: a load step that stays >= 0.25 s.
 
     load_kg: NonNegFloat = Field(description="Mass resting in the dish now, kg (1 g steps).")
     fruit_count: int = Field(
