@@ -47,6 +47,12 @@ class Settings(ServiceSettings):
         description="Containment stage: least intersection over the smaller box to re-attach a "
         "detection to a confirmed track (a fruit growing back out of a partial occlusion).",
     )
+    max_containment_growth: float = Field(
+        default=1.5,
+        gt=1,
+        description="Containment matching: a detection larger (area) than this times the largest "
+        "box the track ever matched is not that fruit (a hand covering it).",
+    )
     coast_velocity_decay: float = Field(
         default=0.8,
         ge=0.0,

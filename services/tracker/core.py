@@ -74,6 +74,7 @@ class TrackerCore:
                 max_depth_jump_m=settings.max_depth_jump_m,
                 depth_smoothing=settings.depth_smoothing,
                 min_containment=settings.min_containment,
+                max_containment_growth=settings.max_containment_growth,
                 coast_velocity_decay=settings.coast_velocity_decay,
             )
         )

@@ -51,6 +51,7 @@ class Track:
         self.gallery.add(m.feature)
         self.score = m.score
         self.depth_m = m.depth_m
+        self.max_area_px = _area(m.xyxy_px)  # the largest box matched: the fruit's whole size
         self._n_init, self._max_age, self._alpha = n_init, max_age, depth_smoothing
 
     @property
@@ -78,6 +79,7 @@ class Track:
         self.mean, self.cov = kf.update(self.mean, self.cov, xyxy_to_xyah(m.xyxy_px))
         self.gallery.add(m.feature)
         self.score = m.score
+        self.max_area_px = max(self.max_area_px, _area(m.xyxy_px))
         if m.depth_m is not None:
             # Depth from one box is noisy (leaf edges, fruit rim): smooth it.
             self.depth_m = (
@@ -93,3 +95,7 @@ class Track:
     def mark_missed(self) -> None:
         if self.state is TrackState.TENTATIVE or self.time_since_update > self._max_age:
             self.state = TrackState.DELETED
+
+
+def _area(xyxy: np.ndarray) -> float:
+    return float(max(xyxy[2] - xyxy[0], 0.0) * max(xyxy[3] - xyxy[1], 0.0))

@@ -11,7 +11,9 @@
    containment: intersection over the smaller box (>= ``min_containment``), under the depth
    gate (not the appearance gate: the occluder is inside the box). A fruit that a hand half
    covers shrinks to its visible part and grows back when the hand leaves; neither the
-   Mahalanobis gate nor IoU accepts that jump, and Deep SORT would start a new ID for it.
+   Mahalanobis gate nor IoU accepts that jump, and Deep SORT would start a new ID for it. A
+   detection larger than ``max_containment_growth`` times the largest box the track ever had
+   is not taken (a hand's box contains the fruit it covers).
 5. Unmatched tracks are marked missed; unmatched detections start tentative tracks with IDs
    from this tracker's own counter (1, 2, ...).
 """
@@ -47,6 +49,7 @@ class TrackerParams:
     max_depth_jump_m: float = 0.25
     depth_smoothing: float = 0.3
     min_containment: float = 0.5
+    max_containment_growth: float = 1.5
     coast_velocity_decay: float = 0.8
 
 
@@ -138,6 +141,10 @@ class Tracker:
             inter = np.prod(np.clip(rb - lt, 0, None), axis=1)
             tarea = max(float(np.prod(tb[2:] - tb[:2])), 1e-6)
             cost[r] = 1.0 - inter / np.maximum(np.minimum(area, tarea), 1e-6)
+            # A fruit's box shrinks behind an occluder and grows back to its whole size, never
+            # beyond: a box much larger than any this track had is something else (the hand
+            # that covers the fruit), not the fruit.
+            cost[r, area > self.p.max_containment_growth * t.max_area_px] = INFTY_COST
         return np.where(self._depth_jumps(tis, depths), INFTY_COST, cost)
 
     def _match(self, dets: Sequence[Measurement]):

@@ -104,3 +104,16 @@ def test_cascade_gives_a_detection_to_the_most_recently_seen_track() -> None:
         lambda t, d: cost[np.ix_(t, d)], 0.5, 300, [0, 1], [0], tsu.__getitem__
     )
     assert matches == [(0, 0)] and unmatched == [1]
+
+
+def test_a_hand_covering_a_fruit_does_not_take_its_id() -> None:
+    # The detector fires on the hand: its box (~4x the fruit's area) contains the fruit's box.
+    # Containment must not hand the fruit's ID to it; the fruit keeps its ID when it reappears.
+    tr = Tracker(TrackerParams(n_init=3))
+    for _ in range(5):
+        step(tr, [BOX_A])
+    hand = np.array([80.0, 80.0, 160.0, 160.0])
+    for _ in range(3):
+        ids = step(tr, [hand])
+        assert ids[0] != 1  # a new (tentative) track, not fruit 1
+    assert step(tr, [BOX_A]) == {0: 1}
