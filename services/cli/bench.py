@@ -1,9 +1,11 @@
-"""`harvest bench ...`: benchmarks (bus, viz, sim, controller; later harvest)."""
+"""`harvest bench ...`: benchmarks (bus, viz, sim, controller, detector, tracker, harvest)."""
 
 from __future__ import annotations
 
 import argparse
 import json
+
+from services.cli import bench_perception
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -60,6 +62,28 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--seed", type=int, default=6, help="seed of the scenes and the targets")
     c.add_argument("--json", action="store_true", help="print one JSON object")
     c.set_defaults(func=cmd_bench_controller)
+    bench_perception.add_parsers(bsub)
+    h = bsub.add_parser(
+        "harvest",
+        help="the whole harvest over seeds, for each harvest-order policy",
+        description="Runs the harvest (sim, detector, tracker, scene, controller, planner) on a "
+        "scenario for each seed and each order policy; judged against the sim's truth: fruit "
+        "harvested and reachable (IK on the true fruit, with the fruit in its way first), "
+        "success rate, unreachable fruit "
+        "identified, collisions (sim contacts), median sim seconds per harvested fruit, wall "
+        "time, real-time factor. --mode inproc runs every core in one process in lock-step "
+        "order; --mode stack runs the real stack under the supervisor (slower).",
+    )
+    h.add_argument("--scenario", default="orchard", help="scenario (default orchard)")
+    h.add_argument("--seeds", default="0-19", help="seeds: A-B, A,B,C or A (default 0-19)")
+    h.add_argument(
+        "--orders", default="nearest,planned", help="order policies (default nearest,planned)"
+    )
+    h.add_argument("--fruit-count", type=int, help="random fruit per tree (sim fruit_count)")
+    h.add_argument("--mode", choices=["inproc", "stack"], default="inproc", help="how to run")
+    h.add_argument("--max-s", type=float, default=240.0, help="sim seconds per run at most")
+    h.add_argument("--json", action="store_true", help="print one JSON object")
+    h.set_defaults(func=cmd_bench_harvest)
 
 
 def cmd_bench_bus(args: argparse.Namespace) -> int:
@@ -95,5 +119,36 @@ def cmd_bench_controller(args: argparse.Namespace) -> int:
     from services.controller.bench import run_controller_bench, table
 
     result = run_controller_bench(args.ticks, args.targets, args.seed, progress=not args.json)
+    print(json.dumps(result, indent=2) if args.json else table(result))
+    return 0
+
+
+def cmd_bench_harvest(args: argparse.Namespace) -> int:
+    import sys
+
+    from services.planner.bench import (
+        BenchConfig,
+        BenchError,
+        parse_seeds,
+        run_harvest_bench,
+        table,
+    )
+
+    try:
+        cfg = BenchConfig(
+            args.scenario,
+            parse_seeds(args.seeds),
+            tuple(o.strip() for o in args.orders.split(",") if o.strip()),
+            args.fruit_count,
+            args.mode,
+            args.max_s,
+        )
+        bad = [o for o in cfg.orders if o not in ("nearest", "planned")]
+        if bad:
+            raise BenchError(f"unknown order policies {bad} (nearest, planned)")
+        result = run_harvest_bench(cfg, progress=lambda line: print(line, file=sys.stderr))
+    except BenchError as exc:
+        print(f"harvest bench harvest: {exc}", file=sys.stderr)
+        return 2
     print(json.dumps(result, indent=2) if args.json else table(result))
     return 0

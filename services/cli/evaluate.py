@@ -1,16 +1,16 @@
 """`harvest eval ...`: measured figures of the perception chain against ground truth.
 
 Each evaluation lives in its own module with ``add_parser(esub)``; this one only makes the
-group (``eval scene`` here; ``eval detector`` / ``eval tracker`` join it the same way).
+group: ``eval detector`` and ``eval tracker`` (eval_perception), ``eval scene`` (eval_scene).
 """
 
 from __future__ import annotations
 
 import argparse
 
-from services.cli import eval_scene
+from services.cli import eval_perception, eval_scene
 
-EVAL_MODULES = (eval_scene,)
+EVAL_MODULES = (eval_perception, eval_scene)
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:

@@ -64,7 +64,11 @@ class Settings(ServiceSettings):
         default=1.0, ge=0, le=20, description="A box side this near the image border is cut, px."
     )
     min_semi_axis_m: float = Field(
-        default=0.015, gt=0, description="Smallest plausible fruit semi-axis d_h, m."
+        default=0.025,
+        gt=0,
+        description="Smallest plausible fruit semi-axis d_h, m (oranges: 3-5 cm radius). A "
+        "smaller estimate is a partial view (a fruit mostly hidden, a box on a part of it): "
+        "refused, the fruit keeps its state.",
     )
     max_semi_axis_m: float = Field(
         default=0.12, gt=0, description="Largest plausible fruit semi-axis d_h, m."
@@ -81,6 +85,45 @@ class Settings(ServiceSettings):
     )
     fruit_hsv_high: HsvTriple = Field(
         default=(30, 255, 255), description="Fruit colour, OpenCV HSV upper bound (inclusive)."
+    )
+    refine_box: bool = Field(
+        default=True,
+        description="Shrink each track's box to the fruit-coloured pixels at the fruit's depth "
+        "inside it before measuring (a detector's boxes are a few pixels loose).",
+    )
+    min_colour_share: float = Field(
+        default=0.15,
+        ge=0,
+        le=1,
+        description="Fewest fruit-coloured pixels, as a share of the box's valid depth pixels, "
+        "for an estimate: a detection on a hand, a branch or a leaf is not a fruit.",
+    )
+    # ---- the robot self-filter ---------------------------------------------------------------
+    robot_self_filter: bool = Field(
+        default=True,
+        description="Drop a fruit estimate that lies inside the robot's own arms or tools (the "
+        "LWR's orange links look like oranges): capsules at the last joint state before the "
+        "frame's stamp. Once a joint state has been received, a Tracks message waits for it.",
+    )
+    joint_state_max_lag_ms: float = Field(
+        default=10.0,
+        gt=0,
+        le=1000,
+        description="The self-filter uses the last joint state before the frame's stamp, at most "
+        "this much older (the sim's control period is 8.3 ms), ms.",
+    )
+    self_filter_share: float = Field(
+        default=0.5,
+        ge=0,
+        le=2,
+        description="An estimate whose centre is closer to a link's axis than the link radius "
+        "plus this share of its d_h is the robot itself (a real fruit touching the link is a "
+        "whole d_h out).",
+    )
+    prefer_whole_views: bool = Field(
+        default=True,
+        description="A fruit whose stored state comes from a whole view (no side cut) keeps it "
+        "against views with a side cut by an occluder or the border.",
     )
     # ---- the persistent list (paper §III-B) --------------------------------------------------
     update_threshold_m: float = Field(
@@ -139,6 +182,14 @@ class Settings(ServiceSettings):
     trunk_forget_after_frames: int = Field(
         default=100, ge=1, description="Frames without a fix after which the trunk is not found."
     )
+    trunk_tool_margin_m: float = Field(
+        default=0.08,
+        ge=0,
+        le=1,
+        description="The trunk obstacle's surface passes this far behind the selected fruit's "
+        "back (the paper: 0): the collecting dish, centred under the fruit, reaches 4.5 cm past "
+        "it and the damper keeps d_s more, m.",
+    )
     trunk_default_radius_m: float = Field(
         default=0.08,
         gt=0,
@@ -148,7 +199,7 @@ class Settings(ServiceSettings):
 
 
 SPEC = NodeSpec(
-    inputs=("camera/rgbd", "perception/tracks", "harvest/events"),
+    inputs=("camera/rgbd", "robot/joint_state", "perception/tracks", "harvest/events"),
     outputs=("scene/state",),
     answers={"perception/tracks": ("scene/state",)},
 )

@@ -10,6 +10,14 @@ answer does not depend on that race. A Tracks message whose
 frame will not come (a newer frame arrived, or it is older than the newest frame and not in
 the buffer) is answered at once: the last state, unchanged, ``input_problem`` saying why
 (counted). At most ``frame_buffer`` Tracks messages wait; past that the oldest is answered so.
+
+The robot self-filter (``robot_self_filter``) needs where the arms were when the frame was
+taken: the last joint state *before* the frame's stamp (at most ``joint_state_max_lag_ms``
+older). Not the one at the frame's stamp: in lock-step the sim publishes that one only after
+the frame's answers are in, this one among them (waiting for it would dead-lock). Once a joint
+state has been received, a Tracks message waits until that joint state is in (another key: it
+could in principle arrive late), so the answer never depends on delivery order. Estimates
+inside the arms' capsules are dropped and counted (``fruit_on_robot``).
 """
 
 from __future__ import annotations
@@ -23,7 +31,9 @@ import numpy as np
 from schemas.camera import RgbdFrame
 from schemas.harvest import HarvestEvent
 from schemas.perception import Tracks
+from schemas.robot import JointState
 from schemas.scene import Fruit, FruitFlag, SceneState, Trunk
+from services.robot.clearance import Capsule, RobotBody, axis_distances_m
 from services.runtime import ConfigError, Output, Stamper
 from services.scene import Settings
 from services.scene.fruit3d import EstimateFailure, FruitEstimate, FruitParams, estimate_fruit
@@ -37,6 +47,8 @@ log = logging.getLogger("scene")
 TOPIC_OUT = "scene/state"
 RATIO_HISTORY = 15  # whole-box views whose median d_v/d_h a fruit keeps
 HARVESTED_EVENTS = ("fruit_collected", "fruit_dropped")
+TARGET_ENDS = (*HARVESTED_EVENTS, "fruit_skipped", "fruit_lost")
+JOINT_BUFFER = 256  # joint states kept (120 Hz: ~2 s, the frame buffer's span at 15 Hz and more)
 
 
 class SceneCore:
@@ -66,6 +78,8 @@ class SceneCore:
             max_semi_axis_m=s.max_semi_axis_m,
             fruit_hsv_low=s.fruit_hsv_low,
             fruit_hsv_high=s.fruit_hsv_high,
+            min_colour_share=s.min_colour_share,
+            refine_box=s.refine_box,
         )
         self.trunk_params = TrunkParams(
             method=s.trunk_method,
@@ -85,6 +99,11 @@ class SceneCore:
                 s.trunk_forget_after_frames,
             )
         )
+        self.target: int | None = None  # the planner's current fruit (harvest/events)
+        self.body = RobotBody() if s.robot_self_filter else None
+        self.joints: OrderedDict[int, JointState] = OrderedDict()  # stamp → joint state
+        self.newest_joint_ns: int | None = None
+        self.joint_lag_ns = round(s.joint_state_max_lag_ms * 1e6)
         self.frames: OrderedDict[int, RgbdFrame] = OrderedDict()
         self.newest_frame_ns: int | None = None
         self.waiting: list[Tracks] = []  # Tracks newer than every frame received so far
@@ -98,22 +117,48 @@ class SceneCore:
     def handle(self, topic: str, msg: Any) -> list[Output]:
         if topic == "camera/rgbd":
             self._keep_frame(msg)
-            # Tracks that waited for this frame (or for one that will not come now) are due.
-            due = [t for t in self.waiting if t.header.stamp_ns <= msg.header.stamp_ns]
-            self.waiting = [t for t in self.waiting if t.header.stamp_ns > msg.header.stamp_ns]
-            return [(TOPIC_OUT, self._answer(t)) for t in due]
-        if topic == "harvest/events":
+        elif topic == "robot/joint_state":
+            if self.body is None:
+                return []
+            self._keep_joints(msg)
+        elif topic == "harvest/events":
             self._take_event(msg)
             return []
-        if topic == "perception/tracks":
-            if self.newest_frame_ns is None or msg.header.stamp_ns > self.newest_frame_ns:
-                self.waiting.append(msg)  # its frame may still be on the way
+        elif topic == "perception/tracks":
+            self.waiting.append(msg)
+            if not self._ready(msg):
                 self.counters["tracks_before_frame"] += 1
-                if len(self.waiting) > self.s.frame_buffer:
-                    return [(TOPIC_OUT, self._answer(self.waiting.pop(0)))]
-                return []
-            return [(TOPIC_OUT, self._answer(msg))]
-        return []
+        else:
+            return []
+        return self._release()
+
+    def _ready(self, t: Tracks) -> bool:
+        """Its frame (and the joint state of its stamp) is in, or a newer one says it will not
+        come."""
+        stamp = t.header.stamp_ns
+        if self.newest_frame_ns is None or stamp > self.newest_frame_ns:
+            return False
+        return self.newest_joint_ns is None or stamp - self.joint_lag_ns <= self.newest_joint_ns
+
+    def _release(self) -> list[Output]:
+        """Answer the waiting Tracks messages that are due, in arrival order; past
+        ``frame_buffer`` waiting, the oldest is answered anyway (with what there is)."""
+        out: list[Output] = []
+        while self.waiting and (
+            self._ready(self.waiting[0]) or len(self.waiting) > self.s.frame_buffer
+        ):
+            out.append((TOPIC_OUT, self._answer(self.waiting.pop(0))))
+        return out
+
+    def _keep_joints(self, js: JointState) -> None:
+        stamp = js.header.stamp_ns
+        self.joints[stamp] = js
+        self.joints.move_to_end(stamp)
+        self.newest_joint_ns = (
+            stamp if self.newest_joint_ns is None else max(self.newest_joint_ns, stamp)
+        )
+        while len(self.joints) > JOINT_BUFFER:
+            self.joints.popitem(last=False)
 
     def _keep_frame(self, frame: RgbdFrame) -> None:
         self.frames[frame.header.seq] = frame
@@ -123,8 +168,20 @@ class SceneCore:
             self.frames.popitem(last=False)
 
     def _take_event(self, ev: HarvestEvent) -> None:
+        if ev.event == "run_finished":
+            self.target = None
         if ev.fruit_id is None:
             return
+        # The obstacle radius is the paper's for the fruit being harvested: follow the planner's
+        # target (its order may differ from nearest-first), across its ID switches.
+        if ev.event == "fruit_selected" or (ev.event == "replanned" and self.target is not None):
+            self.target = ev.fruit_id
+        elif ev.fruit_id == self.target and ev.event in (
+            *HARVESTED_EVENTS,
+            "fruit_skipped",
+            "fruit_lost",
+        ):
+            self.target = None
         if ev.event in HARVESTED_EVENTS:
             self.fruits.mark(ev.fruit_id, "harvested")
             self.counters["mark_harvested"] += 1
@@ -164,6 +221,7 @@ class SceneCore:
         hsv = cv2.cvtColor(np.ascontiguousarray(frame.rgb), cv2.COLOR_RGB2HSV)
         measured: dict[int, Measurement] = {}
         failed: dict[int, FruitFlag] = {}
+        robot = self._robot_at(frame.header.stamp_ns)
         for tr in tracks.tracks:
             if not (tr.confirmed or self.s.accept_tentative):
                 self.counters["track_tentative"] += 1
@@ -178,13 +236,24 @@ class SceneCore:
                 self.counters[f"fruit_{est.reason}"] += 1
                 failed[tr.track_id] = _failure_flag(est)
                 continue
+            if self._keep_whole_view(tr.track_id, est):
+                # A side cut (an arm or a hand passing, leaves) while a whole view of this fruit
+                # is stored: the whole view is the better estimate (a cut view guesses the
+                # missing semi-axis; during a harvest the arms cut every neighbour's box).
+                self.counters["fruit_cut_view_keep_state"] += 1
+                failed[tr.track_id] = "border_cut" if any(est.sides.border) else "edge_occluded"
+                continue
             if not est.sides.whole_pair and tr.track_id in self.fruits.entries:
                 # Cut on two adjacent sides (a corner): the box no longer fixes the shape; a
                 # fruit already measured keeps its state rather than take a guess.
                 self.counters["fruit_box_cut_keep_state"] += 1
                 failed[tr.track_id] = "border_cut" if any(est.sides.border) else "edge_occluded"
                 continue
-            measured[tr.track_id] = self._measurement(tr.track_id, est, T)
+            m = self._measurement(tr.track_id, est, T)
+            if robot and self._on_robot(m, robot):
+                self.counters["fruit_on_robot"] += 1
+                continue
+            measured[tr.track_id] = m
         for note in self.fruits.step(tracks.header.stamp_ns, measured, failed):
             log.debug("%s", note)
         for fid in [k for k in self.ratios if k not in self.fruits.entries]:
@@ -208,6 +277,41 @@ class SceneCore:
             tuple(flags),
         )
 
+    def _robot_at(self, stamp_ns: int) -> tuple[Capsule, ...]:
+        """The arms' and tools' capsules just before the frame's stamp (the dish's sphere left
+        out: a fruit in the dish is the planner's to judge); () without a joint state for it."""
+        if self.body is None or self.newest_joint_ns is None:
+            return ()
+        before = [k for k in self.joints if stamp_ns - self.joint_lag_ns <= k < stamp_ns]
+        js = self.joints[max(before)] if before else None
+        if js is None:
+            self.counters["joint_state_missing"] += 1
+            return ()
+        q = {role: arm.position_rad for role, arm in js.arms.items()}
+        try:
+            return self.body.capsules(q)[:-1]
+        except (KeyError, ValueError) as exc:
+            self.counters["joint_state_invalid"] += 1
+            log.warning("joint state at %d ns: %s; no self-filter for this frame", stamp_ns, exc)
+            return ()
+
+    def _on_robot(self, m: Measurement, robot: tuple[Capsule, ...]) -> bool:
+        radii = np.array([r for _a, _b, r in robot])
+        reach = radii + self.s.self_filter_share * m.semi_axis_h_m
+        return bool((axis_distances_m(m.position_world_m, robot) < reach).any())
+
+    def _keep_whole_view(self, fid: int, est: FruitEstimate) -> bool:
+        """A cut view of a fruit whose whole view is stored (it has whole-view ratios and the
+        stored state came from one)."""
+        e = self.fruits.entries.get(fid)
+        return (
+            self.s.prefer_whole_views
+            and not est.sides.all_good
+            and e is not None
+            and fid in self.ratios
+            and not e.state.flags
+        )
+
     def _v_over_h(self, fid: int) -> float:
         r = self.ratios.get(fid)
         return float(np.median(r)) if r else self.s.v_over_h_prior
@@ -229,12 +333,17 @@ class SceneCore:
     # ---- output --------------------------------------------------------------------------------
     def _state(self, tracks: Tracks, problem: str) -> SceneState:
         entries = self.fruits.sorted_entries()
-        selected_id = self.fruits.selected()
+        selected_id = self.fruits.selected(self.target)
         selected = self.fruits.entries.get(selected_id) if selected_id is not None else None
         fruits = tuple(self._fruit(e, selected_id) for e in entries)
         harvested = {k for k, m in self.fruits.marks.items() if m == "harvested"}
         obstacles = build_obstacles(
-            entries, harvested, self.trunk.state, selected, self.s.trunk_default_radius_m
+            entries,
+            harvested,
+            self.trunk.state,
+            selected,
+            self.s.trunk_default_radius_m,
+            self.s.trunk_tool_margin_m,
         )
         return SceneState(
             header=self.stamper.answer(TOPIC_OUT, tracks.header, frame_id="world"),

@@ -122,9 +122,12 @@ class FruitList:
         if self.marks.get(fruit_id) != "harvested":
             self.marks[fruit_id] = mark
 
-    def selected(self) -> int | None:
-        """The nearest fruit (to the camera's optical centre) neither harvested nor unreachable;
-        ties go to the lower ID."""
+    def selected(self, target: int | None = None) -> int | None:
+        """The planner's current target when it is listed and unmarked; otherwise the nearest
+        fruit (to the camera's optical centre) neither harvested nor unreachable (the paper's
+        rule); ties go to the lower ID."""
+        if target is not None and target in self.entries and target not in self.marks:
+            return target
         free = [e for fid, e in self.entries.items() if fid not in self.marks]
         if not free:
             return None

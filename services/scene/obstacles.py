@@ -10,6 +10,14 @@ horizontal distance the surface passes through the back of the fruit (the side f
 trunk): the arms may reach the fruit from the front, never the space between it and the trunk.
 The radius never goes below the trunk's own (a fruit against the trunk); without a selected
 fruit it is the trunk's own radius.
+
+One departure from the paper, measured: our collecting dish (8.5 cm radius) is centred under the
+fruit, so it reaches ~4.5 cm past the fruit's back, and the controller's damper keeps d_s (2 cm)
+more. With the surface exactly at the fruit's back the dish can never get under it (every
+harvest of paper-exp1 ended "no progress" 5-8 cm short). The surface therefore passes
+``tool_margin_m`` (default 8 cm) behind the fruit's back; the arms still keep out of the space
+near the trunk. The selected fruit is the planner's current target (scene/state follows its
+``fruit_selected`` events), or the nearest when it has none.
 """
 
 from __future__ import annotations
@@ -23,7 +31,7 @@ from services.scene.trunk_track import TrunkState
 
 
 def trunk_radius_m(
-    trunk: TrunkState, selected: Entry | None, default_radius_m: float
+    trunk: TrunkState, selected: Entry | None, default_radius_m: float, tool_margin_m: float = 0.0
 ) -> tuple[float, float]:
     """(r_obs, the trunk's own radius) in m."""
     own = trunk.radius_m if trunk.radius_m is not None else default_radius_m
@@ -31,7 +39,7 @@ def trunk_radius_m(
         return own, own
     p = selected.state.position_world_m
     horizontal = math.hypot(p[0] - trunk.axis_world_m[0], p[1] - trunk.axis_world_m[1])
-    return max(horizontal - selected.state.semi_axis_h_m, own), own
+    return max(horizontal - selected.state.semi_axis_h_m - tool_margin_m, own), own
 
 
 def build_obstacles(
@@ -40,12 +48,13 @@ def build_obstacles(
     trunk: TrunkState | None,
     selected: Entry | None,
     default_trunk_radius_m: float,
+    tool_margin_m: float = 0.0,
 ) -> Obstacles:
     """Cylinder (when the trunk is known) and the ellipsoids of the fruit not harvested
     (unreachable ones stay: they hang on the tree), by fruit ID."""
     cylinders: tuple[CylinderObstacle, ...] = ()
     if trunk is not None:
-        r_obs, _ = trunk_radius_m(trunk, selected, default_trunk_radius_m)
+        r_obs, _ = trunk_radius_m(trunk, selected, default_trunk_radius_m, tool_margin_m)
         cylinders = (
             CylinderObstacle(
                 name="trunk", axis_point_world_m=vec3(trunk.axis_world_m), radius_m=r_obs

@@ -86,6 +86,7 @@ class Supervisor:
         self.bus: Bus | None = None
         self.router: ManagedProcess | None = None
         self.on_event: list[Any] = []  # hooks: callables(name, text) for progress displays
+        self.on_bus: list[Any] = []  # hooks: callables(bus) run once the run's bus is open
 
     # ---- set-up ----------------------------------------------------------------------------
     def say(self, text: str) -> None:
@@ -227,6 +228,8 @@ class Supervisor:
                 self._start_router()
             self.bus = self._open_bus()
             self.bus.watch_health(self._on_health)
+            for hook in self.on_bus:  # e.g. `harvest run`'s progress display subscribes here
+                hook(self.bus)
             for name in self.start_order():
                 if self._stop.is_set():
                     break

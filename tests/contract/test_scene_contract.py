@@ -251,11 +251,13 @@ def test_unreachable_fruit_stay_obstacles_and_are_never_selected() -> None:
     assert a.selected_fruit_id == 3 and b.selected_fruit_id == 4
     assert [f.status for f in b.fruits] == ["unreachable", "selected"]
     assert [e.fruit_id for e in b.obstacles.ellipsoids] == [3, 4]
-    # r_obs for the selected fruit: horizontal distance to the axis less d_h.
+    # r_obs for the selected fruit: horizontal distance to the axis less d_h, less the tools'
+    # margin (the dish reaches past the fruit's back).
     f4 = b.fruits[1]
     axis = b.obstacles.cylinders[0].axis_point_world_m
     horizontal = np.hypot(f4.position_world_m[0] - axis[0], f4.position_world_m[1] - axis[1])
-    assert abs(b.obstacles.cylinders[0].radius_m - (horizontal - f4.semi_axis_h_m)) < 1e-9
+    margin = SETTINGS.trunk_tool_margin_m
+    assert abs(b.obstacles.cylinders[0].radius_m - (horizontal - f4.semi_axis_h_m - margin)) < 1e-9
 
 
 def test_settings_that_cannot_work_refuse_to_start() -> None:

@@ -68,4 +68,6 @@ def test_live_node_calls_the_timer_between_inputs_and_publishes_its_outputs(
         worker.join(timeout=5)
         node.close()
     gaps_ms = [(b - a) / 1e6 for a, b in zip(core.timer_calls, core.timer_calls[1:], strict=False)]
-    assert all(g >= 15 for g in gaps_ms), gaps_ms  # about every 20 ms, never a burst
+    # About every 20 ms at a fixed phase (a late call is followed by a sooner one), never a
+    # burst of catch-up calls back to back (a loaded machine delays calls; no tighter bound).
+    assert all(g >= 2 for g in gaps_ms), gaps_ms
