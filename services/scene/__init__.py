@@ -121,9 +121,11 @@ class Settings(ServiceSettings):
         "whole d_h out).",
     )
     prefer_whole_views: bool = Field(
-        default=True,
+        default=False,
         description="A fruit whose stored state comes from a whole view (no side cut) keeps it "
-        "against views with a side cut by an occluder or the border.",
+        "against views with a side cut by an occluder or the border. Off by default: it held a "
+        "fruit moved by a hand at its old place for seconds (paper-exp1 centre p95 2 → 67 mm); "
+        "the planner keeps its target from a whole view instead.",
     )
     # ---- the persistent list (paper §III-B) --------------------------------------------------
     update_threshold_m: float = Field(
