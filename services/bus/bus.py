@@ -17,7 +17,7 @@ import zenoh
 from schemas.codec import DecodeError
 from schemas.service import ServiceStatus, TopicCounters
 from schemas.topics import Topic, topic
-from services.bus.config import BusSettings, make_zenoh_config
+from services.bus.config import BusSettings, TlsError, make_zenoh_config
 
 log = logging.getLogger("bus")
 
@@ -103,7 +103,9 @@ class Bus:
         self._reject_log = _RejectLog()
         self._handles: list[Any] = []  # keep every declared entity alive
         try:
-            self.session = zenoh.open(make_zenoh_config(settings))
+            self.session = zenoh.open(make_zenoh_config(settings, identity=name))
+        except TlsError as exc:
+            raise BusError(str(exc)) from None
         except zenoh.ZError as exc:
             raise BusError(_explain_open_error(settings, exc)) from None
 
@@ -267,9 +269,15 @@ def _explain_open_error(s: BusSettings, exc: Exception) -> str:
             f"(another run or router? choose another endpoint with --listen)"
         )
     if s.mode == "client":
+        tls = (
+            f"; with TLS ({s.tls_dir}), also check that the router uses the same CA and "
+            f"accepts this certificate"
+            if s.tls_dir
+            else ""
+        )
         return (
             f"cannot connect to {', '.join(s.connect)}: is the router running? "
-            f"(start one with `harvest router` or `harvest run`) ({text})"
+            f"(start one with `harvest run`){tls} ({text})"
         )
     return (
         f"cannot open a Zenoh session ({s.mode}, connect={list(s.connect)}, "

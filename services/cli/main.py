@@ -6,7 +6,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from services.cli import bench, dataset, files, live, replay, run, view
+from services.cli import bench, certs, dataset, files, live, replay, run, view
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -20,6 +20,7 @@ def build_parser() -> argparse.ArgumentParser:
     view.add_parser(sub)
     bench.add_parser(sub)
     dataset.add_parsers(sub)
+    certs.add_parsers(sub)
     return ap
 
 

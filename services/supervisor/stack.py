@@ -62,6 +62,16 @@ class RecordingEntry(_Strict):
     settings: dict[str, Any] = Field(default_factory=dict, description="Recorder settings.")
 
 
+class SecurityEntry(_Strict):
+    """The secured profile: mutual TLS on every link, the router's access control."""
+
+    tls_dir: Path | None = Field(
+        default=None,
+        description="Certificates made by `harvest certs make DIR`; each process presents its "
+        "own (common name = its name). Set: the router must listen on tls/ endpoints.",
+    )
+
+
 class Stack(_Strict):
     """A whole stack: the graph as data."""
 
@@ -73,6 +83,7 @@ class Stack(_Strict):
     seed: int | None = Field(default=None, description="Scenario seed, recorded in metadata.")
     router: RouterEntry = Field(default_factory=RouterEntry, description="The router.")
     recording: RecordingEntry = Field(default_factory=RecordingEntry, description="Recording.")
+    security: SecurityEntry = Field(default_factory=SecurityEntry, description="TLS and ACL.")
     services: dict[str, ServiceEntry] = Field(description="Services, in start order.")
     profiles: dict[str, dict[str, Any]] = Field(default_factory=dict, description="Overlays.")
 
@@ -83,6 +94,13 @@ class Stack(_Strict):
                 raise ValueError(str(UnknownServiceError(name)))
         if self.master is not None and self.master not in self.services:
             raise ValueError(f"master {self.master!r} is not one of the services")
+        if self.security.tls_dir is not None:
+            plain = [e for e in self.router.listen if not e.startswith(("tls/", "quic/"))]
+            if plain:
+                raise ValueError(
+                    f"security.tls_dir is set but router.listen has unencrypted endpoints "
+                    f"{plain}: use tls/HOST:PORT"
+                )
         return self
 
     def enabled(self) -> list[str]:

@@ -14,12 +14,18 @@ from pathlib import Path
 from typing import Any
 
 from services.bus import Bus, BusError, BusSettings, bus_args
+from services.bus.config import TlsError, tls_files
 from services.registry import SERVICE_MODULES, service_def
 from services.runtime.lockstep import LockstepPlan
 from services.runtime.spec import answer_closure
 from services.supervisor.metadata import run_metadata
 from services.supervisor.process import LogSink, ManagedProcess
-from services.supervisor.stack import RestartPolicy, Stack, resolve_service_settings
+from services.supervisor.stack import (
+    RestartPolicy,
+    Stack,
+    StackError,
+    resolve_service_settings,
+)
 
 SELF = "supervisor"
 
@@ -92,7 +98,32 @@ class Supervisor:
         self.sink.line(SELF, text)
 
     def _service_bus(self) -> BusSettings:
-        return BusSettings(mode="client", connect=(self.endpoint,), namespace=self.namespace)
+        return BusSettings(
+            mode="client",
+            connect=(self.endpoint,),
+            namespace=self.namespace,
+            tls_dir=self.stack.security.tls_dir,
+        )
+
+    def _check_certificates(self) -> None:
+        """Secured profile: every process's certificate exists, before anything starts."""
+        tls_dir = self.stack.security.tls_dir
+        if tls_dir is None:
+            return
+        names = [SELF, *self.children]
+        if self.stack.router.enabled:
+            names.append("router")
+        missing = []
+        for name in names:
+            try:
+                tls_files(tls_dir, name)
+            except TlsError:
+                missing.append(name)
+        if missing:
+            raise StackError(
+                f"security.tls_dir: {tls_dir} has no certificate for {', '.join(missing)} "
+                f"(make them with `harvest certs make {tls_dir} --names {','.join(missing)}`)"
+            )
 
     def _argv(self, name: str, settings_json: str, extra: list[str]) -> list[str]:
         return [
@@ -178,6 +209,8 @@ class Supervisor:
             argv += ["-l", e]
         if r.zenoh_config:
             argv += ["--zenoh-config", str(r.zenoh_config)]
+        if self.stack.security.tls_dir is not None:
+            argv += ["--tls-dir", str(self.stack.security.tls_dir)]
         self.router = ManagedProcess("router", argv, self.sink)
         self.router.start()
 
@@ -223,6 +256,7 @@ class Supervisor:
         code = 0
         try:
             self._build_children()
+            self._check_certificates()
             if self.stack.router.enabled:
                 self._start_router()
             self.bus = self._open_bus()
