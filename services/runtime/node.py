@@ -3,6 +3,11 @@
 Every input is decoded on a Zenoh thread, checked for order, queued, and handed to the core on
 one worker thread in arrival order. With all services as clients of one router, arrival order
 is causal order, which is what makes lock-step runs byte-identical.
+
+In lock-step a service answers a repeat of the input it answered last (the master re-sends a
+stalled tick) by publishing its answer again, byte for byte, without calling the core: a
+message lost between two services (a killed service, a restarted router) is then replaced
+along the whole chain, while every consumer still drops the repeats by seq.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ log = logging.getLogger("node")
 
 Output = tuple[str, Any]
 Mode = Literal["lockstep", "live"]
+_REANSWER = "\x00reanswer"  # queue marker: publish the cached answer to (topic, seq) again
 
 
 class Core(Protocol):
@@ -76,6 +82,10 @@ class InputOrder:
     def __init__(self) -> None:
         self.last: dict[str, tuple[int, int]] = {}
 
+    def repeat(self, topic: str, seq: int, stamp_ns: int) -> bool:
+        """True for an exact repeat of the last accepted message (same seq and stamp)."""
+        return self.last.get(topic) == (seq, stamp_ns)
+
     def check(self, topic: str, seq: int, stamp_ns: int) -> str | None:
         prev = self.last.get(topic)
         if prev is not None:
@@ -112,6 +122,7 @@ class Node:
         self._queue: deque[Output] = deque()
         self._cv = threading.Condition()
         self._order = InputOrder()
+        self._answered: dict[str, tuple[int, Sequence[Output]]] = {}  # topic → (seq, outputs)
         self._error_log: set[str] = set()
         self.barrier = AnswerBarrier(self.plan.wait) if mode == "lockstep" else None
         self.bus = Bus(name, bus_settings)
@@ -157,16 +168,25 @@ class Node:
         is_input = topic in self.spec.inputs
         with self._cv:
             if is_input:
+                repeat = self._order.repeat(topic, header.seq, header.stamp_ns)
                 problem = self._order.check(topic, header.seq, header.stamp_ns)
                 if problem:
                     self.bus.reject(topic, problem)
+                    if repeat and self._reanswers(topic):
+                        self._queue.append((_REANSWER, (topic, header.seq)))
+                        self._cv.notify_all()
                     return
                 if self.mode == "live" and topic in self.spec.conflate:
                     self._drop_pending(topic)
                 self._queue.append((topic, msg))
                 self._cv.notify_all()
         if self.barrier is not None:
-            self.barrier.note(topic, header.stamp_ns)
+            self.barrier.note(topic, header.stamp_ns, header.seq)
+
+    def _reanswers(self, topic: str) -> bool:
+        """Answers to ``topic`` are re-published on a repeat: lock-step, not the clock master
+        (it has its own re-send), and ``topic`` has declared answers."""
+        return self.mode == "lockstep" and not self.plan.wait and topic in self.spec.answers
 
     def _drop_pending(self, topic: str) -> None:
         kept = [item for item in self._queue if item[0] != topic]
@@ -221,12 +241,26 @@ class Node:
             wait_s = 0.2 if timer is None else min(0.2, max(0.0, next_due - time.monotonic()))
             item = self.next_input(timeout_s=wait_s)
             if item is not None:
-                self.publish(self.call(core.handle, *item))
+                self._handle(core, *item)
             if timer is not None and time.monotonic() >= next_due:
                 fn, period_s = timer
                 # Fixed phase, but never a burst of catch-up calls after a long input.
                 next_due = max(next_due + period_s, time.monotonic())
                 self.publish(self._call_timer(fn))
+
+    def _handle(self, core: Core, topic: str, msg: Any) -> None:
+        """One input: the core's outputs are published (and kept, to answer a repeat)."""
+        if topic == _REANSWER:
+            key, seq = msg
+            done = self._answered.get(key)
+            if done is not None and done[0] == seq:
+                log.info("%s seq %d came again (re-sent tick): answer published again", key, seq)
+                self.publish(done[1])
+            return
+        outputs = self.call(core.handle, topic, msg)
+        self.publish(outputs)
+        if self._reanswers(topic):
+            self._answered[topic] = (msg.header.seq, outputs)
 
     def _call_timer(self, fn: Any) -> Sequence[Output]:
         """Run the core's timer; an exception is counted and logged once, never fatal."""

@@ -88,3 +88,24 @@ def test_input_order_drops_duplicates_and_backwards_stamps() -> None:
     assert o.check("t", 0, 30) is None  # publisher restarted: seq 0 with a new stamp
     assert "duplicate" in (o.check("t", 0, 30) or "")
     assert o.check("u", 5, 0) is None  # topics are independent
+
+
+def test_a_repeated_answer_is_counted_once() -> None:
+    """A consumer re-publishes its answer when the master re-sends a stalled tick; the copy that
+    arrives after the first one must not satisfy the next group at the same stamp."""
+    b = AnswerBarrier({"demo/tick": ("demo/answer",)})
+    b.expect("demo/tick", 5)
+    b.note("demo/answer", 5, seq=7)
+    b.note("demo/answer", 5, seq=7)  # the re-published copy
+    b.wait(lambda: None, 1.0, 1.0, str)
+    b.expect("demo/tick", 5)
+    b.note("demo/answer", 5, seq=7)  # a late copy, after the group was closed
+    assert b.missing() == [("demo/answer", 5)]
+    b.note("demo/answer", 5, seq=8)
+    assert b.missing() == []
+
+
+def test_input_order_tells_an_exact_repeat() -> None:
+    o = InputOrder()
+    assert o.check("t", 3, 30) is None
+    assert o.repeat("t", 3, 30) and not o.repeat("t", 3, 31) and not o.repeat("u", 3, 30)
