@@ -202,11 +202,28 @@ class Bus:
         sub = self.session.liveliness().declare_subscriber(f"{HEALTH_PREFIX}/*", cb, history=True)
         self._handles.append(sub)
 
+    def declare_token(self, key: str) -> None:
+        """A liveliness token on ``key`` (relative to the namespace), held until close."""
+        self._handles.append(self.session.liveliness().declare_token(key))
+
+    def watch_token(self, key: str, on_change: Callable[[bool], None]) -> None:
+        """``on_change(present)`` whenever the liveliness token ``key`` appears or vanishes."""
+
+        def cb(sample: zenoh.Sample) -> None:
+            on_change(sample.kind == zenoh.SampleKind.PUT)
+
+        sub = self.session.liveliness().declare_subscriber(key, cb, history=True)
+        self._handles.append(sub)
+
     def live_services(self, timeout_s: float = 1.0) -> list[str]:
         """Names of the services whose health token is present now."""
         replies = self.session.liveliness().get(f"{HEALTH_PREFIX}/*", timeout=timeout_s)
         names = {str(r.ok.key_expr).rsplit("/", 1)[-1] for r in replies if r.ok is not None}
         return sorted(names)
+
+    def router_connected(self) -> bool:
+        """Whether this session has a link to a router now (False while one restarts)."""
+        return bool(self.session.info.routers_zid())
 
     def discover_namespaces(self, timeout_s: float = 1.0) -> list[str]:
         """Namespaces with live services, seen from a session opened without a namespace."""
