@@ -113,6 +113,15 @@ def make_zenoh_config(s: BusSettings, identity: str = ""):
         # default (1 s first wait, doubling to 4 s). Start-up is unchanged: a client still fails
         # at once when the router is not there (connect/timeout_ms 0).
         conf.insert_json5("connect/retry", json.dumps(RECONNECT))
+    if s.mode == "router":
+        # A client that stops reading (SIGSTOP) fills its queue in the router; with BLOCK
+        # congestion control the router then stalls every link until the stuck one is closed,
+        # and the other clients' leases run out too. Closing a link blocked for half a lease
+        # keeps the fault on the hung client (Zenoh's default waits 5 s).
+        wait_us = s.lease_ms * 1000 // 2
+        conf.insert_json5(
+            "transport/link/tx/queue/congestion_control/block/wait_before_close", str(wait_us)
+        )
     conf.insert_json5("transport/link/tx/lease", str(s.lease_ms))
     conf.insert_json5("transport/link/tx/keep_alive", "4")
     if s.namespace:
