@@ -264,7 +264,9 @@ class Supervisor:
                 return
             rc = child.proc.poll()
             if rc is not None:
-                raise _StartError(name, f"exited with code {rc} during start-up")
+                child.proc.drain()
+                why = f": {child.proc.tail[-1]}" if child.proc.tail else ""
+                raise _StartError(name, f"exited with code {rc} during start-up{why}")
             if time.monotonic() > deadline:
                 raise _StartError(name, f"not live after {timeout:.0f} s")
             time.sleep(0.02)

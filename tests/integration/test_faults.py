@@ -6,6 +6,7 @@ killed part valid. (Figures: `harvest bench faults`, BENCHMARKS.md.)"""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import signal
@@ -151,3 +152,60 @@ def test_killed_recorder_restarts_into_a_part_file_and_the_killed_part_recovers(
     last = int(SIM_S * 120)
     assert second["robot/joint_state"][-1][0] == last, "the second part does not reach the end"
     assert read_info(part1).run["run_id"] == run_id
+
+
+@contextlib.contextmanager
+def tmpfs(path: Path, size: str) -> Iterator[Path]:
+    """A small tmpfs at ``path`` (a real full disk); skipped where mounting is not allowed."""
+    path.mkdir(parents=True, exist_ok=True)
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(path)])
+    if r.returncode != 0:
+        pytest.skip("cannot mount a tmpfs here (needs root): no real full disk to test with")
+    try:
+        yield path
+    finally:
+        subprocess.run(["umount", "-l", str(path)], check=False)
+
+
+def run_on(d: Path, run_id: str, sim_s: float) -> subprocess.Popen[bytes]:
+    stack = fault_stack(d, sim_s)
+    argv = ["run", "--stack", str(stack), "--run-id", run_id, "--listen", endpoint(d)]
+    return start_harvest(*argv, log=d / "out.log")
+
+
+def test_full_disk_stops_the_recording_with_the_path_named_and_the_run_goes_on(d: Path) -> None:
+    with tmpfs(d / "rec", "3m"):
+        p = run_on(d, "full", 3.0)
+        assert p.wait(timeout=300) == 0, (d / "out.log").read_text()
+        out = (d / "out.log").read_text()
+    mcap = d / "rec" / "full.mcap"
+    assert f"cannot write {mcap}: No space left on device" in out
+    assert "recorder failed for good (exit code 3)" in out and "the run goes on without it" in out
+    assert "restarting recorder" not in out  # a full disk stays full
+    assert "sim finished: stopping the run" in out and "run finished" in out
+    assert "restarting controller" not in out and "restarting viz" not in out
+
+
+def test_read_only_recording_folder_is_refused_before_anything_starts(d: Path) -> None:
+    rec = d / "rec"
+    rec.mkdir()
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=1m", "tmpfs", str(rec)])
+    if r.returncode != 0:
+        pytest.skip("cannot mount a tmpfs here (needs root)")
+    try:
+        r2 = harvest(
+            "run", "--stack", str(fault_stack(d)), "--run-id", "x", "--listen", endpoint(d)
+        )
+    finally:
+        subprocess.run(["umount", "-l", str(rec)], check=False)
+    assert r2.returncode == 2, r2.stdout + r2.stderr
+    assert f"refused to start: cannot write the run log in {rec}" in r2.stdout
+    assert "Read-only file system" in r2.stdout
+
+
+def test_recording_file_that_cannot_be_made_fails_the_start_with_the_path_named(d: Path) -> None:
+    (d / "rec" / "nf.mcap").mkdir(parents=True)  # a folder where the file should go
+    r = harvest("run", "--stack", str(fault_stack(d)), "--run-id", "nf", "--listen", endpoint(d))
+    assert r.returncode == 1, r.stdout + r.stderr
+    mcap = d / "rec" / "nf.mcap"
+    assert f"recorder exited with code 2 during start-up: recorder: cannot write {mcap}" in r.stdout
