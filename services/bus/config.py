@@ -13,6 +13,8 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 RECONNECT = {"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2}
 """How clients re-dial a lost router (Zenoh's connect/retry)."""
+BLOCK_CLOSE_US = 500_000
+"""The router closes a link it could not write to for this long (a hung subscriber), µs."""
 _NS_RE = re.compile(r"^[A-Za-z0-9_\-]+(/[A-Za-z0-9_\-]+)*$")
 
 
@@ -32,7 +34,10 @@ class BusSettings(BaseModel):
     config_file: Path | None = Field(default=None, description="Zenoh json5 config file.")
     multicast_scouting: bool = Field(default=False, description="Zenoh multicast discovery.")
     lease_ms: int = Field(
-        default=1000, gt=0, description="Link lease: a hung peer is dropped after this, ms."
+        default=600,
+        gt=0,
+        description="Link lease: a hung peer is dropped after this, ms (a SIGSTOPped service "
+        "loses its liveliness within it: 1000 ms measured 0.88-1.0 s, too close to 1 s).",
     )
     tls_dir: Path | None = Field(
         default=None,
@@ -116,11 +121,11 @@ def make_zenoh_config(s: BusSettings, identity: str = ""):
     if s.mode == "router":
         # A client that stops reading (SIGSTOP) fills its queue in the router; with BLOCK
         # congestion control the router then stalls every link until the stuck one is closed,
-        # and the other clients' leases run out too. Closing a link blocked for half a lease
-        # keeps the fault on the hung client (Zenoh's default waits 5 s).
-        wait_us = s.lease_ms * 1000 // 2
+        # and the other clients' leases run out too. Closing a link blocked for 0.5 s (less
+        # than a lease) keeps the fault on the hung client (Zenoh's default waits 5 s).
         conf.insert_json5(
-            "transport/link/tx/queue/congestion_control/block/wait_before_close", str(wait_us)
+            "transport/link/tx/queue/congestion_control/block/wait_before_close",
+            str(BLOCK_CLOSE_US),
         )
     conf.insert_json5("transport/link/tx/lease", str(s.lease_ms))
     conf.insert_json5("transport/link/tx/keep_alive", "4")
