@@ -27,6 +27,13 @@ class LockstepPlan(BaseModel):
     consumers: tuple[str, ...] = Field(default=(), description="Services live before tick 0.")
     resend_after_s: float = Field(default=2.0, gt=0, description="Re-publish a stalled group.")
     stall_timeout_s: float = Field(default=60.0, gt=0, description="Give up after this, s.")
+    consumer_wait_s: float = Field(
+        default=5.0,
+        ge=0,
+        description="A consumer that lost its liveliness mid-run (killed, restarting) pauses the "
+        "clock this long at most, so nothing is published it would miss; then the run goes on "
+        "without it until it is back (0: never pause), s.",
+    )
 
 
 class LockstepStall(RuntimeError):

@@ -123,6 +123,9 @@ class Node:
         self._cv = threading.Condition()
         self._order = InputOrder()
         self._answered: dict[str, tuple[int, Sequence[Output]]] = {}  # topic → (seq, outputs)
+        self._live: set[str] = set()  # consumers whose liveliness is present (clock master)
+        self._given_up: set[str] = set()  # consumers left behind after consumer_wait_s
+        self._health_cv = threading.Condition()
         self._error_log: set[str] = set()
         self.barrier = AnswerBarrier(self.plan.wait) if mode == "lockstep" else None
         self.bus = Bus(name, bus_settings)
@@ -279,8 +282,11 @@ class Node:
         In live mode nothing is awaited and sim time is paced by the wall clock × ``speed``.
         """
         self._await_consumers()
+        if self.barrier is not None and self.plan.consumers and self.plan.consumer_wait_s > 0:
+            self.bus.watch_health(self._on_consumer_health)
         wall0, sim0 = time.monotonic(), core.now_ns()
         while not self.stop_event.is_set() and not core.done():
+            self._pause_for_consumers()
             for group in core.emit():
                 self._publish_group(group)
                 self._feed(core)
@@ -325,6 +331,43 @@ class Node:
     def _feed(self, core: SourceCore) -> None:
         for topic, msg in self.drain():
             self.publish(self.call(core.handle, topic, msg))
+
+    def _on_consumer_health(self, name: str, alive: bool) -> None:
+        with self._health_cv:
+            if alive:
+                self._live.add(name)
+                self._given_up.discard(name)
+            else:
+                self._live.discard(name)
+            self._health_cv.notify_all()
+
+    def _pause_for_consumers(self) -> None:
+        """Lock-step, between ticks: while a consumer is down (a restart takes about a second)
+        publish nothing it would miss, so a restarted recorder loses only its unflushed tail.
+        One that stays down longer than ``consumer_wait_s`` (failed for good) is left behind."""
+        if self.barrier is None or self.plan.consumer_wait_s <= 0:
+            return
+        with self._health_cv:
+            missing = [c for c in self.plan.consumers if c not in self._live | self._given_up]
+            if not missing:
+                return
+            log.warning("lock-step: paused, waiting for %s to be live again", ", ".join(missing))
+            deadline = time.monotonic() + self.plan.consumer_wait_s
+            while not self.stop_event.is_set():
+                missing = [c for c in missing if c not in self._live]
+                left = deadline - time.monotonic()
+                if not missing or left <= 0:
+                    break
+                self._health_cv.wait(min(left, 0.05))
+            if missing:
+                self._given_up.update(missing)
+                log.warning(
+                    "lock-step: going on without %s (not live after %.1f s)",
+                    ", ".join(missing),
+                    self.plan.consumer_wait_s,
+                )
+            else:
+                log.info("lock-step: every consumer is live again, resuming")
 
     def _await_consumers(self, timeout_s: float = 60.0) -> None:
         """Before tick 0: every declared consumer must be live (its subscriptions are up)."""
