@@ -1,0 +1,297 @@
+"""`harvest bench faults`: kills and hangs survived under the supervisor, fuzz cases and crashes,
+messages lost after a kill, restart time, and how fast the controller stops the arms when its
+inputs go stale. Every figure is measured here; BENCHMARKS.md quotes the output."""
+
+from __future__ import annotations
+
+import itertools
+import os
+import shutil
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from services.bus import Bus, BusSettings
+
+KILLABLE = ("controller", "viz", "recorder")
+"""Services of the running stack that are restarted by policy (the sim is the run's clock)."""
+FAST = "{policy: on-failure, max_restarts: 3, backoff_s: 0.05}"
+TICK_HZ = 120
+
+
+def stack_yaml(d: Path, sim_s: float) -> str:
+    return f"""
+name: bench-faults
+mode: lockstep
+master: sim
+scenario: paper-exp1
+recording: {{enabled: true, dir: {d / "rec"}, restart: {FAST}}}
+services:
+  controller: {{restart: {FAST}}}
+  viz: {{restart: {FAST}, settings: {{viewer: none, save_path: {d / "viz.rrd"}}}}}
+  sim:
+    main: true
+    settings: {{scenario: paper-exp1, duration_s: {sim_s}}}
+"""
+
+
+def _wait(pred: Callable[[], Any], timeout_s: float, what: str) -> Any:
+    deadline = time.monotonic() + timeout_s
+    while True:
+        v = pred()
+        if v:
+            return v
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"timed out after {timeout_s:.0f} s waiting for {what}")
+        time.sleep(0.01)
+
+
+def _received(bus: Bus, name: str) -> int:
+    st = bus.query_status(name, 1.0)
+    return sum(c.received for c in st[0].topics.values()) if st else 0
+
+
+def fault_run(name: str, sig: int, sim_s: float = 6.0) -> dict[str, Any]:
+    """One supervised lock-step run; ``sig`` sent to ``name`` after 100 received messages."""
+    d = Path(tempfile.mkdtemp(prefix="hvb-", dir="/tmp"))
+    try:
+        return _fault_run(d, name, sig, sim_s)
+    finally:
+        shutil.rmtree(d, ignore_errors=True)
+
+
+def _fault_run(d: Path, name: str, sig: int, sim_s: float) -> dict[str, Any]:
+    (d / "stack.yaml").write_text(stack_yaml(d, sim_s))
+    ep = f"unixsock-stream/{d}/router.sock"
+    run_id = "bench"
+    argv = [sys.executable, "-m", "services.cli", "run", "--stack", str(d / "stack.yaml")]
+    argv += ["--run-id", run_id, "--listen", ep, "--quiet"]
+    with open(d / "out.log", "wb") as log:
+        p = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+    events: list[tuple[float, bool]] = []
+    lock = threading.Lock()
+
+    def on_health(n: str, up: bool) -> None:
+        if n == name:
+            with lock:
+                events.append((time.monotonic(), up))
+
+    def bus() -> Bus | None:
+        try:
+            return Bus("bench-observer", BusSettings(connect=(ep,), namespace=f"harvest/{run_id}"))
+        except Exception:
+            return None
+
+    obs: Bus = _wait(bus, 60, "the run's router")
+    try:
+        obs.watch_health(on_health)
+        st = _wait(lambda: obs.query_status(name, 1.0), 60, f"status of {name}")
+        _wait(lambda: p.poll() is None and _received(obs, name) > 100, 120, f"{name} progress")
+        t_fault, wall_fault_ns = time.monotonic(), time.time_ns()
+        os.kill(st[0].pid, sig)
+
+        def after(up: bool, since: float) -> float | None:
+            with lock:
+                return next((t for t, u in events if u is up and t > since), None)
+
+        t_down = _wait(lambda: after(False, t_fault), 30, f"{name}'s liveliness to go")
+        t_up = _wait(lambda: after(True, t_down), 60, f"{name} back")
+    finally:
+        obs.close()
+    rc = p.wait(timeout=300)
+    run_log = d / "rec" / f"{run_id}.log"  # --quiet: the supervisor's lines are only here
+    out = run_log.read_text(errors="replace") if run_log.exists() else ""
+    lost = _lost(d / "rec", run_id, name, wall_fault_ns, sim_s)
+    return {
+        "service": name,
+        "signal": signal.Signals(sig).name,
+        "survived": rc == 0 and f"restarting {name}" in out,
+        "liveliness_lost_s": t_down - t_fault,
+        "back_live_s": t_up - t_fault,
+        **lost,
+    }
+
+
+def _lost(rec: Path, run_id: str, name: str, wall_fault_ns: int, sim_s: float) -> dict[str, Any]:
+    """Messages lost: joint-state ticks missing from the recording (all parts; a killed part
+    recovered first) and ticks without a command; for the recorder also the lost tail."""
+    from schemas import TOPICS
+    from services.recorder.inspect import iter_messages
+    from services.recorder.recover import recover
+
+    first = rec / f"{run_id}.mcap"
+    parts = sorted(rec.glob(f"{run_id}*.mcap"))
+    out: dict[str, Any] = {}
+    if name == "recorder":
+        fixed = rec / "recovered.mcap"
+        recover(first, fixed)
+        log_ns = [m.log_time_ns for m in iter_messages(fixed)]
+        out["recorder_lost_tail_s"] = (wall_fault_ns - max(log_ns)) * 1e-9 if log_ns else None
+        parts = [fixed, *[p for p in parts if p != first and p != fixed]]
+    states: set[int] = set()
+    answered: set[int | None] = set()
+    cmd = TOPICS["robot/command"].codec
+    for part in parts:
+        for m in iter_messages(part):
+            if m.topic == "robot/joint_state":
+                states.add(m.sequence)
+            elif m.topic == "robot/command":
+                answered.add(cmd.decode(m.payload).header.answers_seq)
+    ticks = round(sim_s * TICK_HZ) + 1
+    out["joint_states_lost"] = ticks - len(states & set(range(ticks)))
+    out["ticks_unanswered_in_recording"] = len(states - answered)
+    return out
+
+
+def arm_stop(rounds: int = 5) -> dict[str, Any]:
+    """The controller as a live process: joint states at 120 Hz for 0.5 s, then none; the time
+    from the last joint state sent to the zero-velocity command received, per round."""
+    from services.controller import SERVICE
+    from services.controller.kinsim import KinematicSim
+    from services.controller.scenarios import harvest_target, scene
+    from services.runtime.settings import load_settings
+
+    timeout_ms = float(load_settings(SERVICE.settings, {}).model_dump()["joint_state_timeout_ms"])
+    d = Path(tempfile.mkdtemp(prefix="hvs-", dir="/tmp"))
+    ep = f"unixsock-stream/{d}/r.sock"
+    flags = ["-e", ep, "--namespace", "bench/armstop"]
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-m", "services.router", "-l", ep, "--namespace", "bench/armstop"],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+    ]
+    stops_ms: list[float] = []
+    try:
+        settings = BusSettings(connect=(ep,), namespace="bench/armstop")
+        bus: Bus = _wait(lambda: _try(lambda: Bus("bench", settings)), 30, "router")
+        procs.append(
+            subprocess.Popen(
+                [sys.executable, "-m", "services.controller", *flags, "--time-mode", "live"],
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+            )
+        )
+        _wait(lambda: "controller" in bus.live_services(0.3), 60, "controller")
+        got: list[tuple[float, Any]] = []
+        lock = threading.Lock()
+
+        def on_cmd(key: str, msg: Any) -> None:
+            with lock:
+                got.append((time.monotonic(), msg))
+
+        bus.subscribe("robot/command", on_cmd)
+        sim = KinematicSim()
+        pubs = {k: bus.publisher(k) for k in ("scene/state", "plan/target", "robot/joint_state")}
+        fruit = (0.75, 0.05, 1.05)
+        seq = itertools.count()
+        for _ in range(rounds):
+            pubs["scene/state"].put(scene(stamp_ns=sim.stamp_ns, seq=next(seq)))
+            t_next = time.monotonic()
+            for _ in range(TICK_HZ // 2):
+                pubs["plan/target"].put(harvest_target(fruit, stamp_ns=sim.stamp_ns, seq=next(seq)))
+                pubs["robot/joint_state"].put(sim.joint_state())
+                t_last = time.monotonic()
+                sim.tick += 1
+                t_next += 1 / TICK_HZ
+                time.sleep(max(0.0, t_next - time.monotonic()))
+
+            def stop_cmd(since: float = t_last) -> float | None:
+                with lock:
+                    for t, m in got:
+                        zero = all(v == 0.0 for a in m.arms.values() for v in a.velocity_rad_s)
+                        if t > since and m.hold and m.header.answers_seq is None and zero:
+                            return t
+                return None
+
+            t_stop = _wait(stop_cmd, 5, "the watchdog's zero-velocity command")
+            stops_ms.append((t_stop - t_last) * 1e3)
+            time.sleep(0.3)
+        bus.close()
+    finally:
+        for pr in reversed(procs):
+            pr.terminate()
+            pr.wait(timeout=10)
+        shutil.rmtree(d, ignore_errors=True)
+    return {
+        "watchdog_timeout_ms": timeout_ms,
+        "arm_stop_ms_rounds": stops_ms,
+        "arm_stop_ms": max(stops_ms),
+        "arm_stop_ms_median": statistics.median(stops_ms),
+        "arm_stop_after_stale_ms": max(stops_ms) - timeout_ms,
+    }
+
+
+def _try(fn: Callable[[], Any]) -> Any:
+    try:
+        return fn()
+    except Exception:
+        return None
+
+
+def run_faults_bench(
+    fuzz_cases: int = 500, sim_s: float = 6.0, progress: bool = True
+) -> dict[str, Any]:
+    """Kill and hang every restartable service once, fuzz every service, time the arm stop."""
+    from services.testkit.fuzz_targets import fuzz_all
+
+    def say(text: str) -> None:
+        if progress:
+            print(text, file=sys.stderr, flush=True)
+
+    runs = []
+    for name in KILLABLE:
+        for sig in (signal.SIGKILL, signal.SIGSTOP):
+            say(f"fault: {signal.Signals(sig).name} {name} ...")
+            runs.append(fault_run(name, sig, sim_s))
+    say(f"fuzz: {fuzz_cases} cases per service ...")
+    fuzz = fuzz_all(fuzz_cases)
+    outcomes = {k: v for k, v in fuzz.items() if not isinstance(v, str)}
+    say("arm stop: controller watchdog in live mode ...")
+    stop = arm_stop()
+    kills = [r for r in runs if r["signal"] == "SIGKILL"]
+    hangs = [r for r in runs if r["signal"] == "SIGSTOP"]
+    return {
+        "kills_tried": len(kills),
+        "kills_survived": sum(r["survived"] for r in kills),
+        "hangs_tried": len(hangs),
+        "hangs_survived": sum(r["survived"] for r in hangs),
+        "restart_s_max": max(r["back_live_s"] for r in kills),
+        "hang_detected_s_max": max(r["liveliness_lost_s"] for r in hangs),
+        "hang_back_live_s_max": max(r["back_live_s"] for r in hangs),
+        "messages_lost_after_kill": sum(r["joint_states_lost"] for r in kills),
+        "lost_by_service": {r["service"]: r["joint_states_lost"] for r in kills},
+        "recorder_lost_tail_s": next(
+            r["recorder_lost_tail_s"] for r in kills if r["service"] == "recorder"
+        ),
+        "fuzz_cases": sum(o.cases for o in outcomes.values()),
+        "fuzz_rejected": sum(o.rejected_decode + o.dropped_order for o in outcomes.values()),
+        "crashes": sum(len(o.crashes) for o in outcomes.values()),
+        "crash_samples": [c for o in outcomes.values() for c in o.crashes][:5],
+        "fuzz_per_service": {
+            k: (v if isinstance(v, str) else {"cases": v.cases, "crashes": len(v.crashes)})
+            for k, v in fuzz.items()
+        },
+        **stop,
+        "runs": runs,
+    }
+
+
+def table(r: dict[str, Any]) -> str:
+    lines = [f"{k:32} {v}" for k, v in r.items() if k not in ("runs", "fuzz_per_service")]
+    lines.append("")
+    lines.append(f"{'service':12} {'signal':8} {'survived':9} {'lost s':>7} {'back s':>7} lost")
+    for x in r["runs"]:
+        lines.append(
+            f"{x['service']:12} {x['signal']:8} {x['survived']!s:9} "
+            f"{x['liveliness_lost_s']:7.2f} {x['back_live_s']:7.2f} {x['joint_states_lost']}"
+        )
+    return "\n".join(lines)
