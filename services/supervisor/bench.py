@@ -21,7 +21,8 @@ from typing import Any
 from services.bus import Bus, BusSettings
 
 KILLABLE = ("controller", "viz", "recorder")
-"""Services of the running stack that are restarted by policy (the sim is the run's clock)."""
+"""Services of the running stack that are restarted by policy (the sim is the run's clock);
+the router is killed once too (restarted by `router.restart`, clients re-dial it)."""
 FAST = "{policy: on-failure, max_restarts: 3, backoff_s: 0.05}"
 TICK_HZ = 120
 
@@ -32,6 +33,7 @@ name: bench-faults
 mode: lockstep
 master: sim
 scenario: paper-exp1
+router: {{restart: {{policy: on-failure, max_restarts: 3, backoff_s: 0.2}}}}
 recording: {{enabled: true, dir: {d / "rec"}, restart: {FAST}}}
 services:
   controller: {{restart: {FAST}}}
@@ -92,10 +94,12 @@ def _fault_run(d: Path, name: str, sig: int, sim_s: float) -> dict[str, Any]:
     obs: Bus = _wait(bus, 60, "the run's router")
     try:
         obs.watch_health(on_health)
-        st = _wait(lambda: obs.query_status(name, 1.0), 60, f"status of {name}")
-        _wait(lambda: p.poll() is None and _received(obs, name) > 100, 120, f"{name} progress")
+        watched = "controller" if name == "router" else name  # the router serves no status
+        st = _wait(lambda: obs.query_status(watched, 1.0), 60, f"status of {watched}")
+        pid = _router_pid(ep) if name == "router" else st[0].pid
+        _wait(lambda: p.poll() is None and _received(obs, watched) > 100, 120, "progress")
         t_fault, wall_fault_ns = time.monotonic(), time.time_ns()
-        os.kill(st[0].pid, sig)
+        os.kill(pid, sig)
 
         def after(up: bool, since: float) -> float | None:
             with lock:
@@ -112,11 +116,26 @@ def _fault_run(d: Path, name: str, sig: int, sim_s: float) -> dict[str, Any]:
     return {
         "service": name,
         "signal": signal.Signals(sig).name,
-        "survived": rc == 0 and f"restarting {name}" in out,
+        "survived": rc == 0
+        and ("restarting the router" if name == "router" else f"restarting {name}") in out,
         "liveliness_lost_s": t_down - t_fault,
         "back_live_s": t_up - t_fault,
         **lost,
     }
+
+
+def _router_pid(endpoint: str) -> int:
+    """The pid of the run's router process (found by its listen endpoint)."""
+    for proc in Path("/proc").iterdir():
+        if not proc.name.isdigit():
+            continue
+        try:
+            cmd = (proc / "cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        if b"services.router" in cmd and endpoint.encode() in cmd:
+            return int(proc.name)
+    raise RuntimeError(f"no router process listening on {endpoint}")
 
 
 def _lost(rec: Path, run_id: str, name: str, wall_fault_ns: int, sim_s: float) -> dict[str, Any]:
@@ -146,6 +165,9 @@ def _lost(rec: Path, run_id: str, name: str, wall_fault_ns: int, sim_s: float) -
                 answered.add(cmd.decode(m.payload).header.answers_seq)
     ticks = round(sim_s * TICK_HZ) + 1
     out["joint_states_lost"] = ticks - len(states & set(range(ticks)))
+    if name == "router":  # the outage as the recorder saw it: the longest silence
+        t = sorted(m.log_time_ns for m in iter_messages(first) if m.topic == "robot/joint_state")
+        out["outage_s"] = max(b - a for a, b in itertools.pairwise(t)) * 1e-9
     out["ticks_unanswered_in_recording"] = len(states - answered)
     return out
 
@@ -252,6 +274,8 @@ def run_faults_bench(
         for sig in (signal.SIGKILL, signal.SIGSTOP):
             say(f"fault: {signal.Signals(sig).name} {name} ...")
             runs.append(fault_run(name, sig, sim_s))
+    say("fault: SIGKILL router ...")
+    router = fault_run("router", signal.SIGKILL, sim_s)
     say(f"fuzz: {fuzz_cases} cases per service ...")
     fuzz = fuzz_all(fuzz_cases)
     outcomes = {k: v for k, v in fuzz.items() if not isinstance(v, str)}
@@ -272,6 +296,10 @@ def run_faults_bench(
         "recorder_lost_tail_s": next(
             r["recorder_lost_tail_s"] for r in kills if r["service"] == "recorder"
         ),
+        "router_restart_survived": router["survived"],
+        "router_back_live_s": router["back_live_s"],
+        "router_outage_s": router["outage_s"],
+        "router_ticks_lost": router["joint_states_lost"],
         "fuzz_cases": sum(o.cases for o in outcomes.values()),
         "fuzz_rejected": sum(o.rejected_decode + o.dropped_order for o in outcomes.values()),
         "crashes": sum(len(o.crashes) for o in outcomes.values()),
@@ -281,7 +309,7 @@ def run_faults_bench(
             for k, v in fuzz.items()
         },
         **stop,
-        "runs": runs,
+        "runs": [*runs, router],
     }
 
 
