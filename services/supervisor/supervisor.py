@@ -296,6 +296,12 @@ class Supervisor:
         rc = child.proc.poll()
         if rc is None:
             if self.health.hung(child, now):
+                if self._answers(name, child):
+                    # A link that dropped and is being re-dialled (a loaded machine can miss a
+                    # lease): the process still answers, so it is not hung. Judge again later.
+                    self.say(f"{name} lost its liveliness but answers its status: not hung")
+                    child.lost_at = time.monotonic()
+                    return None
                 self.say(f"{name} lost its liveliness while its process runs: hung, killing it")
                 child.proc.signal(signal.SIGKILL)
                 child.was_alive = False
@@ -328,6 +334,17 @@ class Supervisor:
             self.warnings.append(text)
             return None
         return 1, f"{name} failed for good (exit code {rc}): {tail}"
+
+    def _answers(self, name: str, child: Child, timeout_s: float = 0.2) -> bool:
+        """Whether ``name``'s current process answers a status query within ``timeout_s``
+        (a hung process cannot: its status queryable runs in its own Python)."""
+        if self.bus is None or child.proc.pid is None:
+            return False
+        try:
+            got = self.bus.query_status(name, timeout_s)
+        except Exception:  # the bus itself is in trouble: trust the liveliness
+            return False
+        return any(st.pid == child.proc.pid for st in got)
 
     # ---- run -------------------------------------------------------------------------------
     def run(self) -> RunResult:

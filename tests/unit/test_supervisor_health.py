@@ -75,3 +75,36 @@ def test_backoff_doubles_and_gives_up() -> None:
 
 def test_log_sink_without_a_file(tmp_path: Path) -> None:
     LogSink(quiet=True).line("x", "no file, no error")
+
+
+class _FakeBus:
+    def __init__(self, pids: list[int]) -> None:
+        self.pids = pids
+
+    def query_status(self, name: str, timeout_s: float) -> list[object]:
+        from types import SimpleNamespace
+
+        return [SimpleNamespace(pid=p) for p in self.pids]
+
+
+def test_lost_liveliness_with_a_status_answer_is_not_hung(tmp_path: Path) -> None:
+    """A link that flapped (a lease missed under load) is told from a hang by a status query
+    that only the running process can answer."""
+    from services.supervisor.stack import load_stack
+    from services.supervisor.supervisor import Supervisor
+
+    (tmp_path / "s.yaml").write_text(
+        "name: t\nmode: lockstep\nmaster: demo_clock\n"
+        f"recording: {{dir: {tmp_path}}}\n"
+        "services:\n  demo_worker: {}\n  demo_clock: {main: true}\n"
+    )
+    sup = Supervisor(load_stack(tmp_path / "s.yaml"), tmp_path / "s.yaml", "r", quiet=True)
+    c = child()
+    c.proc.proc = type("P", (), {"pid": 4242})()  # type: ignore[assignment]
+    sup.bus = _FakeBus([4242])  # type: ignore[assignment]
+    assert sup._answers("demo_worker", c)
+    sup.bus = _FakeBus([1])  # type: ignore[assignment]
+    assert not sup._answers("demo_worker", c)  # another process answers: not ours
+    sup.bus = _FakeBus([])  # type: ignore[assignment]
+    assert not sup._answers("demo_worker", c)
+    sup.sink.close()
