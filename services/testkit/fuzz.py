@@ -145,11 +145,11 @@ def adversarial_doc(doc: dict[str, Any], rng: random.Random) -> dict[str, Any]:
                 items = list(_get(doc, p))
                 doc = _set(doc, p, [items[i % len(items)] for i in range(MANY)])
         elif op == 4 and "header" in doc:
-            back = rng.choice([1, 10**6, 10**9, doc["header"]["stamp_ns"]])
-            stamp = max(0, doc["header"]["stamp_ns"] - back)
+            back = rng.choice([1, 10**6, 10**9, doc["header"]["stamp_ns"], -(10**30)])
+            stamp = max(0, doc["header"]["stamp_ns"] - back)  # back in time, or far ahead
             doc = {**doc, "header": {**doc["header"], "stamp_ns": stamp}}
         elif op == 5 and "header" in doc:
-            seq = rng.choice([0, max(0, doc["header"]["seq"] - 1), doc["header"]["seq"]])
+            seq = rng.choice([0, max(0, doc["header"]["seq"] - 1), doc["header"]["seq"], 2**64])
             doc = {**doc, "header": {**doc["header"], "seq": seq}}
     return doc
 

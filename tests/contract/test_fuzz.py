@@ -11,6 +11,7 @@ too slow to build per example), which is also more adversarial: a crash message 
 
 from __future__ import annotations
 
+import json
 import random
 import tempfile
 from collections.abc import Iterator
@@ -106,3 +107,21 @@ def test_mutations_reach_every_kind_of_bad_input(pool: list[Output]) -> None:
     broken = {malformed(payload, rng) for _ in range(100)}
     assert b"" in broken or any(len(b) < len(payload) for b in broken)
     assert any(b"NaN" in b for b in broken)
+
+
+def test_stamps_and_seqs_beyond_64_bits_are_rejected_by_every_codec(pool: list[Output]) -> None:
+    """They once validated and crashed the recorder's MCAP writer (found by the fuzz)."""
+    from schemas import TOPICS
+    from schemas.codec import DecodeError
+
+    seen: set[str] = set()
+    for topic, msg in pool:
+        if topic in seen or not TOPICS[topic].codec.zenoh_encoding.startswith("application/json"):
+            continue
+        seen.add(topic)
+        for field, value in (("stamp_ns", 10**30), ("seq", 2**64)):
+            doc = msg.model_dump(mode="json")
+            doc["header"][field] = value
+            with pytest.raises(DecodeError):
+                TOPICS[topic].codec.decode(json.dumps(doc).encode())
+    assert len(seen) >= 8
