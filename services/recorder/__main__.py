@@ -89,7 +89,14 @@ class Recorder:
                 last_flush = time.monotonic()
 
     def _write(self, s: RawSample) -> None:
-        result = self.writer.write(s.key, s.payload, s.encoding, s.recv_ns)
+        try:
+            result = self.writer.write(s.key, s.payload, s.encoding, s.recv_ns)
+        except OSError:
+            raise  # the file cannot be written any more: run() ends the recorder (exit 3)
+        except Exception as exc:  # one sample the writer cannot take must not stop the rest
+            self.errors += 1
+            self.bus.reject(s.key, f"cannot record: {type(exc).__name__}: {exc}")
+            return
         if result == "rejected":
             self.bus.reject(s.key, "payload does not decode; recorded under _rejected/")
         elif result == "unknown":
