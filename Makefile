@@ -11,6 +11,7 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(VENV)/bin/pip install --quiet --upgrade pip
 	$(VENV)/bin/pip install --quiet -e '.[dev]' --config-settings editable_mode=compat
+	$(VENV)/bin/pip install --quiet --no-deps trackeval==1.3.0
 	touch $(STAMP)
 
 run: $(STAMP)

@@ -31,6 +31,11 @@ class Detections(Message):
     image_height_px: int = Field(gt=0, description="Height of the image the boxes refer to.")
     detector: str = Field(description="Detector name and weights version, e.g. 'net:v1' or 'hsv'.")
     detections: tuple[Detection, ...] = Field(default=(), description="Detections, any order.")
+    input_problem: str = Field(
+        default="",
+        description="Why the input frame could not be used ('' when it was used); the "
+        "detections are then empty.",
+    )
 
 
 class Track(Frozen):
@@ -58,3 +63,13 @@ class Tracks(Message):
 
     frame_seq: int = Field(ge=0, description="seq of the camera/rgbd frame the boxes refer to.")
     tracks: tuple[Track, ...] = Field(default=(), description="Tracks, sorted by track_id.")
+    rejected_detections: int = Field(
+        default=0,
+        ge=0,
+        description="Detections of the input dropped as unusable (outside the image, absurd size).",
+    )
+    input_problem: str = Field(
+        default="",
+        description="Why the input could not be used ('' when it was); the tracker state was "
+        "then left unchanged and the tracks are those of the previous frame.",
+    )

@@ -6,7 +6,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from schemas.base import ArmRole, FiniteFloat, Frozen, Message
+from schemas.base import ArmRole, FiniteFloat, Frozen, Message, NonNegFloat
 
 
 class ArmJointState(Frozen):
@@ -62,3 +62,13 @@ class ToolCommand(Message):
     tool: ArmRole = Field(description="Which arm's tool acts.")
     action: Literal["cut", "open"] = Field(description="'cut' closes the shears; 'open' opens.")
     fruit_id: int | None = Field(default=None, ge=1, description="Fruit the action is meant for.")
+
+
+class BasketState(Message):
+    """The collecting tool's load cell (robot/basket): the load in the dish, and how many fruit
+    have settled in it so far (the sensor's step detector: a load step that stays ≥ 0.25 s)."""
+
+    load_kg: NonNegFloat = Field(description="Mass resting in the dish now, kg (1 g steps).")
+    fruit_count: int = Field(
+        ge=0, description="Fruit that have settled in the dish since the start (never decreases)."
+    )

@@ -9,7 +9,20 @@ from pydantic import Field
 from schemas.base import Frozen, Message, NonNegFloat, PosFloat, Vec3
 
 FruitStatus = Literal["candidate", "selected", "harvested", "unreachable"]
-FruitFlag = Literal["border_cut", "depth_invalid", "depth_inconsistent", "stale", "position_jump"]
+FruitFlag = Literal[
+    "border_cut",
+    "edge_occluded",
+    "box_invalid",
+    "depth_invalid",
+    "depth_inconsistent",
+    "stale",
+    "position_jump",
+]
+"""Quality flags of a fruit's estimate: ``border_cut`` its box touches the image border;
+``edge_occluded`` a nearer occluder cuts a side of its box (that semi-axis comes from the fruit's
+height/width ratio); ``box_invalid`` / ``depth_invalid`` / ``depth_inconsistent`` this frame's
+box or depth gave no estimate (the stored one is kept); ``stale`` not detected in this frame;
+``position_jump`` this frame's position was too far from the stored one (kept)."""
 
 
 class Fruit(Frozen):
@@ -30,10 +43,25 @@ class Fruit(Frozen):
 class Trunk(Frozen):
     """The trunk estimate (paper §III-C): a vertical axis through P_t."""
 
-    found: bool = Field(description="False when no trunk pixels passed the HSV ∩ depth mask.")
-    position_cam_m: Vec3 | None = Field(default=None, description="P_t in the camera frame, m.")
-    position_world_m: Vec3 | None = Field(default=None, description="P_t in the world frame, m.")
-    pixel_count: int = Field(default=0, ge=0, description="Pixels in the trunk mask.")
+    found: bool = Field(
+        description="False when there is no estimate: never found, or no fix for the scene "
+        "service's forget_after_frames frames (then positions are None)."
+    )
+    position_cam_m: Vec3 | None = Field(
+        default=None, description="P_t in the camera frame of this frame, m (on the axis)."
+    )
+    position_world_m: Vec3 | None = Field(
+        default=None,
+        description="P_t in the world frame, m: a point on the axis at the mean height of the "
+        "trunk pixels (smoothed over frames).",
+    )
+    radius_m: PosFloat | None = Field(
+        default=None, description="The trunk's own radius as measured, m (None if unknown)."
+    )
+    pixel_count: int = Field(default=0, ge=0, description="Pixels in this frame's trunk mask.")
+    frames_unseen: int = Field(
+        default=0, ge=0, description="Camera frames since the last fix that was averaged in."
+    )
 
 
 class CylinderObstacle(Frozen):
@@ -70,4 +98,9 @@ class SceneState(Message):
     obstacles: Obstacles = Field(description="Obstacles for collision avoidance.")
     selected_fruit_id: int | None = Field(
         default=None, description="Nearest fruit neither harvested nor unreachable, if any."
+    )
+    input_problem: str = Field(
+        default="",
+        description="Why this Tracks message could not be used ('' when it was), e.g. its "
+        "frame was never received; the state is then the last good one, unchanged.",
     )

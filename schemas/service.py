@@ -45,6 +45,10 @@ class ServiceStatus(Frozen):
     topics: dict[str, TopicCounters] = Field(default_factory=dict, description="Per-topic counts.")
     rejected_unknown: int = Field(default=0, ge=0, description="Payloads on undeclared keys.")
     errors: int = Field(default=0, ge=0, description="Exceptions raised by the core (counted).")
+    core_counters: dict[str, int] = Field(
+        default_factory=dict,
+        description="Counts the core keeps of inputs it refused or repaired, by reason.",
+    )
 
 
 class DemoTick(Message):

@@ -9,7 +9,7 @@ from schemas.codec import Codec, JsonCodec, RgbdCodec
 from schemas.control import ControllerDiagnostics, ControlStatus, PlanTarget
 from schemas.harvest import HarvestEvent, RunSummary
 from schemas.perception import Detections, Tracks
-from schemas.robot import JointState, JointVelocityCommand, ToolCommand
+from schemas.robot import BasketState, JointState, JointVelocityCommand, ToolCommand
 from schemas.scene import SceneState
 from schemas.service import DemoAnswer, DemoTick, ServiceStatus
 from schemas.sim import GroundTruth, SimEvent
@@ -44,6 +44,11 @@ TOPICS: dict[str, Topic] = {
         _t("robot/joint_state", JsonCodec(JointState), "Joint state, one per control tick."),
         _t("robot/command", JsonCodec(JointVelocityCommand), "Joint velocities per tick."),
         _t("robot/tool", JsonCodec(ToolCommand), "Tool actions (cut / open)."),
+        _t(
+            "robot/basket",
+            JsonCodec(BasketState),
+            "Basket load cell: load and fruit count (with the joint state, 15 Hz).",
+        ),
         _t("perception/detections", JsonCodec(Detections), "Detections, one per frame."),
         _t("perception/tracks", JsonCodec(Tracks), "Tracks, one per Detections."),
         _t("scene/state", JsonCodec(SceneState), "Fruit list, trunk, obstacles, selection."),

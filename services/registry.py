@@ -15,6 +15,10 @@ SERVICE_MODULES: dict[str, str] = {
     "camera_file": "services.camera_file",
     "realsense": "services.realsense",
     "controller": "services.controller",
+    "detector": "services.detector",
+    "tracker": "services.tracker",
+    "planner": "services.planner",
+    "scene": "services.scene",
 }
 
 

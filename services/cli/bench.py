@@ -1,9 +1,12 @@
-"""`harvest bench ...`: benchmarks (bus, viz, sim, controller, faults; later harvest)."""
+"""`harvest bench ...`: benchmarks (bus, viz, sim, controller, detector, tracker, harvest,
+faults)."""
 
 from __future__ import annotations
 
 import argparse
 import json
+
+from services.cli import bench_perception
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -73,6 +76,28 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--sim-seconds", type=float, default=6.0, help="sim seconds of each run")
     f.add_argument("--json", action="store_true", help="print one JSON object")
     f.set_defaults(func=cmd_bench_faults)
+    bench_perception.add_parsers(bsub)
+    h = bsub.add_parser(
+        "harvest",
+        help="the whole harvest over seeds, for each harvest-order policy",
+        description="Runs the harvest (sim, detector, tracker, scene, controller, planner) on a "
+        "scenario for each seed and each order policy; judged against the sim's truth: fruit "
+        "harvested and reachable (IK on the true fruit, with the fruit in its way first), "
+        "success rate, unreachable fruit "
+        "identified, collisions (sim contacts), median sim seconds per harvested fruit, wall "
+        "time, real-time factor. --mode inproc runs every core in one process in lock-step "
+        "order; --mode stack runs the real stack under the supervisor (slower).",
+    )
+    h.add_argument("--scenario", default="orchard", help="scenario (default orchard)")
+    h.add_argument("--seeds", default="0-19", help="seeds: A-B, A,B,C or A (default 0-19)")
+    h.add_argument(
+        "--orders", default="nearest,planned", help="order policies (default nearest,planned)"
+    )
+    h.add_argument("--fruit-count", type=int, help="random fruit per tree (sim fruit_count)")
+    h.add_argument("--mode", choices=["inproc", "stack"], default="inproc", help="how to run")
+    h.add_argument("--max-s", type=float, default=240.0, help="sim seconds per run at most")
+    h.add_argument("--json", action="store_true", help="print one JSON object")
+    h.set_defaults(func=cmd_bench_harvest)
 
 
 def cmd_bench_bus(args: argparse.Namespace) -> int:
@@ -119,3 +144,34 @@ def cmd_bench_faults(args: argparse.Namespace) -> int:
     print(json.dumps(result, indent=2) if args.json else table(result))
     ok = result["kills_survived"] == result["kills_tried"] and result["crashes"] == 0
     return 0 if ok else 1
+
+
+def cmd_bench_harvest(args: argparse.Namespace) -> int:
+    import sys
+
+    from services.planner.bench import (
+        BenchConfig,
+        BenchError,
+        parse_seeds,
+        run_harvest_bench,
+        table,
+    )
+
+    try:
+        cfg = BenchConfig(
+            args.scenario,
+            parse_seeds(args.seeds),
+            tuple(o.strip() for o in args.orders.split(",") if o.strip()),
+            args.fruit_count,
+            args.mode,
+            args.max_s,
+        )
+        bad = [o for o in cfg.orders if o not in ("nearest", "planned")]
+        if bad:
+            raise BenchError(f"unknown order policies {bad} (nearest, planned)")
+        result = run_harvest_bench(cfg, progress=lambda line: print(line, file=sys.stderr))
+    except BenchError as exc:
+        print(f"harvest bench harvest: {exc}", file=sys.stderr)
+        return 2
+    print(json.dumps(result, indent=2) if args.json else table(result))
+    return 0

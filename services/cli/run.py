@@ -1,4 +1,5 @@
-"""`harvest run`: start a stack under the supervisor and print a summary when it ends."""
+"""`harvest run`: start a stack under the supervisor and print a summary when it ends; with a
+planner in the stack, a line per harvest event, a progress bar of fruit and the harvest table."""
 
 from __future__ import annotations
 
@@ -64,6 +65,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--save", type=Path, metavar="RRD", help="add the viz service; write an .rrd")
     p.add_argument("--viz-port", type=int, default=9876, help="gRPC port of the viewer (--view)")
+    p.add_argument("--phases", action="store_true", help="also print every harvest phase change")
     p.set_defaults(func=cmd_run)
 
 
@@ -113,6 +115,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         updates["services"] = with_viz(stack, args.view, args.save, args.viz_port)
     if updates:
         stack = stack.model_copy(update=updates)
+    stack = label_planner(stack)
     try:
         sup = Supervisor(
             stack, args.stack, args.run_id or new_run_id(), args.profile, quiet=args.quiet
@@ -122,13 +125,52 @@ def cmd_run(args: argparse.Namespace) -> int:
             f"[red]refused to start:[/] cannot write the run log in {stack.recording.dir}: {exc}"
         )
         return 2
+    watch = None
+    if "planner" in stack.enabled():
+        from services.cli.harvest_view import HarvestWatch
+
+        watch = HarvestWatch(con, show_phases=args.phases)
+        sup.on_bus.append(watch.attach)
     try:
         result = sup.run()
     except StackError as exc:
         con.print(f"[red]refused to start:[/] {exc}")
         return 2
+    finally:
+        if watch is not None:
+            watch.stop()
     print_summary(con, result)
+    if watch is not None:
+        print_harvest(con, watch, result)
     return result.exit_code
+
+
+def label_planner(stack: Stack) -> Stack:
+    """The planner labels its run summary with the scenario and seed: the sim's (or the
+    stack's) unless the planner's settings name them."""
+    planner, sim = stack.services.get("planner"), stack.services.get("sim")
+    if planner is None:
+        return stack
+    sim_settings = sim.settings if sim is not None else {}
+    label = {
+        "scenario": sim_settings.get("scenario", stack.scenario),
+        "seed": sim_settings.get("seed", stack.seed),
+    }
+    settings = {**{k: v for k, v in label.items() if v not in (None, "")}, **planner.settings}
+    entry = planner.model_copy(update={"settings": settings})
+    return stack.model_copy(update={"services": {**stack.services, "planner": entry}})
+
+
+def print_harvest(console: Console, watch: object, r: RunResult) -> None:
+    """The harvest tables when the planner published its summary."""
+    from services.cli.harvest_view import HarvestWatch, summary_tables
+
+    assert isinstance(watch, HarvestWatch)
+    if watch.summary is None:
+        console.print("[yellow]no harvest summary was published (the planner did not finish)[/]")
+        return
+    for t in summary_tables(watch.summary, watch.sim_contacts, r.wall_s, r.mcap):
+        console.print(t)
 
 
 def print_summary(console: Console, r: RunResult) -> None:

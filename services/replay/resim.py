@@ -172,7 +172,9 @@ def resim(
             _wait_live(d.name, live, p, timeout_s=60.0)
 
         def alive() -> bool:
-            return all(p.running() for p in procs)
+            # A service that finished by itself (exit 0: the planner after its summary) is done,
+            # not dead: nothing more will come from it.
+            return all(p.running() or p.poll() == 0 for p in procs)
 
         player = Player(
             bus,
@@ -190,7 +192,7 @@ def resim(
                 + ", ".join(
                     f"{p.name} (exit {p.poll()}: {' / '.join(p.tail[-2:])})"
                     for p in procs
-                    if not p.running()
+                    if not p.running() and p.poll() != 0
                 )
             )
         time.sleep(0.2)  # let trailing outputs arrive before diffing (they can only add extras)

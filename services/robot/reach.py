@@ -62,12 +62,17 @@ class ReachSolver:
         self.robot.update_kinematics()
 
     def solve(
-        self, p_tip_world: np.ndarray, yaw_rad: float = 0.0, iters: int = 250
+        self,
+        p_tip_world: np.ndarray,
+        yaw_rad: float = 0.0,
+        iters: int = 250,
+        basket_below_m: float = BASKET_BELOW_M,
     ) -> tuple[float, float]:
         """IK of the harvest pose. The cutter points forward (tool axis horizontal) turned by
         ``yaw_rad`` about the world vertical (the paper's free θ_a, sampled by ``reach``); the dish
-        is ``BASKET_BELOW_M`` under the tip, opening up, its rotation about its own normal free.
+        is ``basket_below_m`` under the tip, opening up, its rotation about its own normal free.
         Returns (tip error, relative error) in m (orientation errors × 0.1 m/rad)."""
+        offset = np.array([basket_below_m, 0.0, 0.0])  # cutter x points down
         pl, r = self.placo, self.robot
         self.set_home()
         s = pl.KinematicsSolver(r)
@@ -79,9 +84,7 @@ class ReachSolver:
         pos.configure("tip", "soft", 1.0)
         ori = s.add_orientation_task(TOOL_FRAME["cutter"], R)
         ori.configure("tip_ori", "soft", 1.0)
-        rpos = s.add_relative_position_task(
-            TOOL_FRAME["cutter"], TOOL_FRAME["collector"], _basket_offset()
-        )
+        rpos = s.add_relative_position_task(TOOL_FRAME["cutter"], TOOL_FRAME["collector"], offset)
         rpos.configure("rel", "soft", 1.0)
         rori = s.add_relative_orientation_task(
             TOOL_FRAME["cutter"], TOOL_FRAME["collector"], _BASKET_IN_CUTTER
@@ -104,7 +107,7 @@ class ReachSolver:
         pos_err = float(np.linalg.norm(T[:3, 3] - p_tip_world))
         pos_err += 0.1 * float(np.linalg.norm(_log3(R @ T[:3, :3].T)))
         T_rel = r.get_T_a_b(TOOL_FRAME["cutter"], TOOL_FRAME["collector"])
-        rel_err = float(np.linalg.norm(T_rel[:3, 3] - _basket_offset()))
+        rel_err = float(np.linalg.norm(T_rel[:3, 3] - offset))
         normal = (T[:3, :3] @ T_rel[:3, :3])[:, 2]
         rel_err += 0.1 * math.acos(max(-1.0, min(1.0, normal[2])))  # dish normal vs up, rad
         return pos_err, rel_err

@@ -1,6 +1,6 @@
 """Service runtime: specs, settings, the Node around a pure core, lock-step and the entry point."""
 
-from services.runtime.lockstep import AnswerBarrier, LockstepPlan, LockstepStall
+from services.runtime.lockstep import AnswerBarrier, LockstepPlan, LockstepStall, LockstepStopped
 from services.runtime.node import Core, Mode, Node, Output, SourceCore, TimedCore
 from services.runtime.service import ConfigError, ServiceDef, run_service
 from services.runtime.settings import ServiceSettings, SettingsError, config_hash, load_settings
@@ -13,6 +13,7 @@ __all__ = [
     "Core",
     "LockstepPlan",
     "LockstepStall",
+    "LockstepStopped",
     "Mode",
     "Node",
     "NodeSpec",

@@ -40,6 +40,10 @@ class LockstepStall(RuntimeError):
     """No answer arrived in time; the message lists the missing (topic, stamp) pairs."""
 
 
+class LockstepStopped(RuntimeError):
+    """The wait was abandoned because the process is stopping (not a failure)."""
+
+
 class AnswerBarrier:
     """Counts answers per (topic, stamp) and blocks until the expected ones are in."""
 
@@ -87,16 +91,22 @@ class AnswerBarrier:
         resend_after_s: float,
         stall_timeout_s: float,
         describe: Callable[[list[tuple[str, int]]], str],
+        stopping: Callable[[], bool] = lambda: False,
     ) -> None:
         """Block until nothing is missing. Every ``resend_after_s`` without progress, call
         ``resend`` (consumers drop duplicates, so only the ones that missed it react);
-        raise LockstepStall after ``stall_timeout_s``."""
+        raise LockstepStall after ``stall_timeout_s``, LockstepStopped as soon as ``stopping()``
+        (a run whose main service has finished is stopped while the master awaits answers that
+        will never come)."""
         t0 = last = time.monotonic()
         with self._cv:
             while True:
                 missing = self._missing()
                 if not missing:
                     break
+                if stopping():
+                    self._expected.clear()
+                    raise LockstepStopped(describe(missing))
                 now = time.monotonic()
                 if now - t0 > stall_timeout_s:
                     raise LockstepStall(describe(missing))

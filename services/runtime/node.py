@@ -23,7 +23,7 @@ from typing import Any, Literal, Protocol
 from schemas.service import ServiceState, ServiceStatus
 from services import __version__
 from services.bus import Bus, BusSettings
-from services.runtime.lockstep import AnswerBarrier, LockstepPlan, LockstepStall
+from services.runtime.lockstep import AnswerBarrier, LockstepPlan, LockstepStall, LockstepStopped
 from services.runtime.spec import NodeSpec
 
 log = logging.getLogger("node")
@@ -34,7 +34,12 @@ _REANSWER = "\x00reanswer"  # queue marker: publish the cached answer to (topic,
 
 
 class Core(Protocol):
-    """A reactive core: pure, deterministic, no I/O and no wall clock."""
+    """A reactive core: pure, deterministic, no I/O and no wall clock.
+
+    A core may also have ``done() -> bool``: once it returns True (checked after each input's
+    outputs are published) the service stops and exits 0. The planner uses it to end the run
+    when it has published its summary (it is the stack's main service).
+    """
 
     def handle(self, topic: str, msg: Any) -> Sequence[Output]: ...
 
@@ -127,6 +132,7 @@ class Node:
         self._given_up: set[str] = set()  # consumers left behind after consumer_wait_s
         self._health_cv = threading.Condition()
         self._error_log: set[str] = set()
+        self._core: Any = None  # set by the run loop; its ``counters`` (if any) go into status
         self.barrier = AnswerBarrier(self.plan.wait) if mode == "lockstep" else None
         self.bus = Bus(name, bus_settings)
         self._pubs = {k: self.bus.publisher(k) for k in spec.outputs}
@@ -163,6 +169,7 @@ class Node:
             topics={k: c.frozen() for k, c in sorted(self.bus.counters.items())},
             rejected_unknown=self.bus.rejected_unknown,
             errors=self.errors,
+            core_counters=dict(sorted(getattr(self._core, "counters", {}).items())),
         )
 
     # ---- inputs ----------------------------------------------------------------------------
@@ -240,11 +247,17 @@ class Node:
         the core's timer (``TimedCore``) when it is due, between inputs."""
         timer = timer_of(core, self.mode)
         next_due = time.monotonic() + (timer[1] if timer else 0.0)
+        self._core = core
+        done = getattr(core, "done", None)
         while not self.stop_event.is_set():
             wait_s = 0.2 if timer is None else min(0.2, max(0.0, next_due - time.monotonic()))
             item = self.next_input(timeout_s=wait_s)
             if item is not None:
                 self._handle(core, *item)
+                if done is not None and done():
+                    log.info("core finished: stopping")
+                    self.stop_event.set()
+                    break
             if timer is not None and time.monotonic() >= next_due:
                 fn, period_s = timer
                 # Fixed phase, but never a burst of catch-up calls after a long input.
@@ -287,9 +300,13 @@ class Node:
         wall0, sim0 = time.monotonic(), core.now_ns()
         while not self.stop_event.is_set() and not core.done():
             self._pause_for_consumers()
-            for group in core.emit():
-                self._publish_group(group)
-                self._feed(core)
+            try:
+                for group in core.emit():
+                    self._publish_group(group)
+                    self._feed(core)
+            except LockstepStopped as exc:
+                log.info("stopped while awaiting answers (%s)", exc)
+                return
             core.advance()
             if self.mode == "live":
                 lag = (core.now_ns() - sim0) * 1e-9 / speed - (time.monotonic() - wall0)
@@ -308,7 +325,8 @@ class Node:
                 lambda: self._resend(group),
                 self.plan.resend_after_s,
                 self.plan.stall_timeout_s,
-                self._describe_missing,
+                self._describe_missing_now,
+                self.stop_event.is_set,
             )
         except LockstepStall:
             self.state = "failed"
@@ -320,6 +338,12 @@ class Node:
             self._describe_missing(self.barrier.missing() if self.barrier else []),
         )
         self.publish(group)
+
+    def _describe_missing_now(self, missing: list[tuple[str, int]]) -> str:
+        """The stall message; on stop, only the missing answers (no liveliness query)."""
+        if self.stop_event.is_set():
+            return ", ".join(f"{t} @ {s} ns" for t, s in missing)
+        return self._describe_missing(missing)
 
     def _describe_missing(self, missing: list[tuple[str, int]]) -> str:
         live = set(self.bus.live_services(timeout_s=0.3))

@@ -53,7 +53,7 @@ class Settings(ServiceSettings):
 
 SPEC = NodeSpec(
     inputs=("robot/command", "robot/tool"),
-    outputs=("camera/rgbd", "robot/joint_state", "sim/truth", "sim/events"),
+    outputs=("camera/rgbd", "robot/joint_state", "robot/basket", "sim/truth", "sim/events"),
     answers={},
 )
 

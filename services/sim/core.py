@@ -1,10 +1,11 @@
 """Pure core of the sim (a clock master): ticks of physics, joint states, camera frames, truth.
 
 Time: tick k is valid at k·control_period_ns. Each tick emits, in order, (1) on camera ticks a
-group [camera/rgbd, sim/truth], then (2) [robot/joint_state, sim/events...]; the Node awaits the
-answers of each group before the next, so perception has answered a frame before the
-controller sees the joint state of the same tick. Commands received during tick k drive the
-physics step k → k+1 (``advance``). No wall clock; all randomness seeded.
+group [camera/rgbd, sim/truth], then (2) [robot/joint_state, robot/basket (camera ticks only),
+sim/events...]; the Node awaits the answers of each group before the next, so perception has
+answered a frame before the controller sees the joint state of the same tick. Commands received
+during tick k drive the physics step k → k+1 (``advance``). No wall clock; all randomness
+seeded.
 """
 
 from __future__ import annotations
@@ -16,7 +17,13 @@ import numpy as np
 
 from schemas.base import ARM_ROLES, Pose
 from schemas.camera import RgbdFrame, RgbdFrameMeta
-from schemas.robot import ArmJointState, JointState, JointVelocityCommand, ToolCommand
+from schemas.robot import (
+    ArmJointState,
+    BasketState,
+    JointState,
+    JointVelocityCommand,
+    ToolCommand,
+)
 from schemas.sim import GroundTruth, SimCounters, SimEvent, TrunkTruth
 from services.robot.model import HOME_RAD, joint_names
 from services.runtime import ConfigError, Output, Stamper
@@ -102,6 +109,8 @@ class SimCore:
         if self.k % self.s.camera_every_ticks == 0:
             groups.append(self.camera_group(stamp))
         outs: list[Output] = [("robot/joint_state", self.joint_state(stamp))]
+        if self.k % self.s.camera_every_ticks == 0:
+            outs.append(("robot/basket", self.basket(stamp)))
         outs += [("sim/events", self._event(e, stamp)) for e in self.pending]
         self.pending.clear()
         groups.append(outs)
@@ -222,6 +231,14 @@ class SimCore:
                 velocity_rad_s=tuple(float(v) for v in self.qd[sl]),
             )
         return JointState(header=self.stamper.header("robot/joint_state", stamp), arms=arms)
+
+    def basket(self, stamp: int) -> BasketState:
+        """The collecting tool's load cell (a robot-side sensor, unlike sim/truth)."""
+        return BasketState(
+            header=self.stamper.header("robot/basket", stamp, "basket_center"),
+            load_kg=self.fruits.basket_load_kg(),
+            fruit_count=self.fruits.settled_in_basket,
+        )
 
     def scene_objects(self) -> list[RenderObject]:
         """Everything to draw at the current tick."""

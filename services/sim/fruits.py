@@ -61,6 +61,7 @@ class Fruits:
         self.all = [FruitStatus(f, f.centre.copy()) for f in world.fruits]
         for s in self.all:
             s.stem_top = s.peduncle()[1]
+        self.settled_in_basket = 0  # what the basket's load cell counts (load steps)
 
     def positions(self) -> dict[int, np.ndarray]:
         return {s.fruit.fruit_id: s.pos for s in self.all}
@@ -139,6 +140,7 @@ class Fruits:
         s.in_dish_s = s.in_dish_s + self.dt if in_dish else 0.0
         if s.in_dish_s >= SETTLE_S:
             s.state = "collected"
+            self.settled_in_basket += 1
             return [Ev("collected", fid, f"fruit_{fid}", "robot/basket", "settled in the basket")]
         slow = self.physics.fruit_speed(fid) < REST_SPEED_M_S
         s.still_s = s.still_s + self.dt if slow and not in_dish else 0.0
@@ -147,6 +149,16 @@ class Fruits:
             where = touching[0] if touching else "nothing"
             return [Ev("dropped", fid, f"fruit_{fid}", where, "came to rest outside the basket")]
         return []
+
+    def basket_load_kg(self) -> float:
+        """What a load cell under the dish reads: the mass of the fruit resting in it (collected
+        and not yet taken out), rounded to 1 g (no noise: the count is what the planner uses)."""
+        kg = sum(
+            self.physics.fruit_mass(s.fruit.fruit_id)
+            for s in self.all
+            if s.state == "collected" and not s.removed
+        )
+        return round(kg, 3)
 
     def _inside_dish(self, s: FruitStatus) -> bool:
         p, R = self.physics.frame("basket_center")

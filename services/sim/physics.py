@@ -202,6 +202,10 @@ class Physics:
         p, q = self.pb.getBasePositionAndOrientation(self.fruit_body[i], physicsClientId=self.cid)
         return np.asarray(p), tuple(q)
 
+    def fruit_mass(self, i: int) -> float:
+        """Mass of fruit i, kg (density × ellipsoid volume)."""
+        return self._fruit_mass[i]
+
     def fruit_speed(self, i: int) -> float:
         v, _ = self.pb.getBaseVelocity(self.fruit_body[i], physicsClientId=self.cid)
         return float(np.linalg.norm(v))

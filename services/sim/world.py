@@ -23,6 +23,7 @@ from services.sim.scenario import (
 )
 
 BRANCH_SEGMENT_M = 0.12  # long branches are cut in pieces (tighter screen rectangles)
+ROBOT_CLEARANCE_M = 0.05  # random fruit surface to the robot at HOME_RAD, at least
 
 
 @dataclass(frozen=True)
@@ -98,7 +99,10 @@ def build_world(sc: Scenario, seed: int | None = None, fruit_count: int | None =
 def random_fruits(
     sc: Scenario, rf: RandomFruits, placed: list[FruitSpec], rng: np.random.Generator
 ) -> list[FruitSpec]:
-    """Fruit at random in the camera's view, refusing overlaps and the trunk."""
+    """Fruit at random in the camera's view, refusing overlaps, the trunk, and the robot in its
+    initial posture (a fruit inside an arm would be a contact from tick 0)."""
+    from services.robot.clearance import distance_to_home_robot_m
+
     T = head_camera_pose()
     out: list[FruitSpec] = []
     for _ in range(rf.count):
@@ -122,6 +126,8 @@ def random_fruits(
             try:
                 check_fruit_places(sc.tree, (*placed, *out, cand), "random_fruits")
             except ValueError:
+                continue
+            if distance_to_home_robot_m(p) < cand.radius_m + ROBOT_CLEARANCE_M:
                 continue
             if all(
                 math.dist(cand.position_world_m, g.position_world_m) > 0.11 for g in (*placed, *out)

@@ -93,6 +93,7 @@ class Supervisor:
         self._main_seen = False
         self._main_lost_at: float | None = None
         self.on_event: list[Any] = []  # hooks: callables(name, text) for progress displays
+        self.on_bus: list[Any] = []  # hooks: callables(bus) run once the run's bus is open
 
     @property
     def alive(self) -> dict[str, bool]:
@@ -359,6 +360,8 @@ class Supervisor:
                 self._start_router()
             self.bus = self._open_bus()
             self.bus.watch_health(self.health.on_health)
+            for hook in self.on_bus:  # e.g. `harvest run`'s progress display subscribes here
+                hook(self.bus)
             for name in self.start_order():
                 if self._stop.is_set():
                     break

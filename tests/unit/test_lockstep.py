@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import threading
+import time
 
 import pytest
 
-from services.runtime.lockstep import AnswerBarrier, LockstepStall
+from services.runtime.lockstep import AnswerBarrier, LockstepStall, LockstepStopped
 from services.runtime.node import InputOrder
 from services.runtime.spec import NodeSpec, answer_closure
 
@@ -109,3 +110,17 @@ def test_input_order_tells_an_exact_repeat() -> None:
     o = InputOrder()
     assert o.check("t", 3, 30) is None
     assert o.repeat("t", 3, 30) and not o.repeat("t", 3, 31) and not o.repeat("u", 3, 30)
+
+
+def test_barrier_gives_up_at_once_when_the_process_stops() -> None:
+    # A run whose main service finished stops the master while it awaits answers that will
+    # never come: the wait must end now, not after the stall timeout.
+    b = AnswerBarrier({"robot/joint_state": ("plan/target",)})
+    b.expect("robot/joint_state", 5)
+    stop = threading.Event()
+    threading.Timer(0.05, stop.set).start()
+    t0 = time.monotonic()
+    with pytest.raises(LockstepStopped, match="plan/target @ 5 ns"):
+        b.wait(lambda: None, 10.0, 30.0, lambda m: str(m[0][0]) + f" @ {m[0][1]} ns", stop.is_set)
+    assert time.monotonic() - t0 < 2.0
+    assert b.missing() == []  # the abandoned group is forgotten

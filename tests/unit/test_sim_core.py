@@ -45,7 +45,7 @@ def test_same_scenario_seed_and_settings_give_byte_identical_outputs(tmp_path: P
     a, b = digest(scripted_run(sc)), digest(scripted_run(sc))
     assert a == b
     topics = {t for t, _ in a}
-    assert topics == {"camera/rgbd", "sim/truth", "robot/joint_state", "sim/events"}
+    assert topics == {"camera/rgbd", "sim/truth", "robot/joint_state", "robot/basket", "sim/events"}
     c = digest(scripted_run(sc, seed=99))  # another seed: another tree and other noise
     assert [x for x in c if x[0] == "camera/rgbd"] != [x for x in a if x[0] == "camera/rgbd"]
 
@@ -57,7 +57,7 @@ def test_ticks_frames_and_groups_follow_the_documented_schedule(tmp_path: Path) 
         groups.append([[t for t, _ in g] for g in c.emit()])
         c.advance()
     assert len(groups) == 25  # 0.2 s at 120 Hz, tick 24 at 0.19999999 s
-    assert groups[0] == [["camera/rgbd", "sim/truth"], ["robot/joint_state"]]
+    assert groups[0] == [["camera/rgbd", "sim/truth"], ["robot/joint_state", "robot/basket"]]
     assert groups[1] == [["robot/joint_state"]]
     assert sum(len(g) == 2 for g in groups) == 4  # ticks 0, 8, 16, 24: 15 Hz
 
@@ -126,6 +126,12 @@ def test_a_cut_at_the_peduncle_detaches_the_fruit_into_the_basket(tmp_path: Path
     truth = [m for t, m in outs if t == "sim/truth"][-1]
     assert truth.fruits[0].state == "collected" and truth.counters.cuts == 1
     assert c.counters["contacts"] == 0  # cutting at the peduncle is not a collision
+    # The basket's load cell: no fruit before the cut, one settled fruit and its mass after.
+    baskets = [m for t, m in outs if t == "robot/basket"]
+    assert baskets[0].fruit_count == 0 and baskets[0].load_kg == 0.0
+    assert baskets[-1].fruit_count == 1
+    mass = c.physics.fruit_mass(0)
+    assert baskets[-1].load_kg == pytest.approx(mass, abs=0.0011) and mass > 0.1
 
 
 def test_a_cut_3_cm_from_the_peduncle_fails(tmp_path: Path) -> None:
@@ -136,6 +142,7 @@ def test_a_cut_3_cm_from_the_peduncle_fails(tmp_path: Path) -> None:
     (missed,) = events(outs, "cut_missed")
     assert "0.0300 m" in missed.detail
     assert c.fruits.all[0].state == "attached" and c.counters["cuts_missed"] == 1
+    assert [m.fruit_count for t, m in outs if t == "robot/basket"] == [0]
 
 
 def test_the_collector_has_no_shears(tmp_path: Path) -> None:

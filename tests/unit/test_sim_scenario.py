@@ -87,3 +87,15 @@ def test_paper_exp2_has_exactly_one_fruit_out_of_reach() -> None:
         s.reach(np.asarray(f.position_world_m)).reached for f in load_scenario("paper-exp2").fruits
     ]
     assert reached == [True, True, True, True, False]
+
+
+def test_random_fruit_keep_clear_of_the_robot_in_its_initial_posture() -> None:
+    from services.robot.clearance import distance_to_home_robot_m
+    from services.sim.world import ROBOT_CLEARANCE_M
+
+    sc = load_scenario("orchard")
+    for seed in range(6):  # seeds 0-2 used to put a fruit inside an arm
+        for f in build_world(sc, seed=seed).fruits:
+            assert distance_to_home_robot_m(f.centre) - f.semi_axes[0] >= ROBOT_CLEARANCE_M
+    # the distance is that of a point to the arm's capsules: the cutter tip is on the robot
+    assert distance_to_home_robot_m((0.55, 0.0, 1.05)) < 0

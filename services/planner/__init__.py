@@ -1,0 +1,250 @@
+"""Harvest task planner (paper §IV): select a fruit, approach its pre-pose, reach the harvest pose,
+cut, wait for the fruit in the basket, leave, next; unreachable fruit skipped with the reason;
+one plan target per control status, harvest events and a run summary."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field, model_validator
+from pydantic_settings import SettingsConfigDict
+
+from services.runtime import NodeSpec, ServiceDef, ServiceSettings
+
+OrderPolicy = Literal["nearest", "planned"]
+
+
+class Settings(ServiceSettings):
+    """Settings of the planner. Distances in m, times in s of sim time (message stamps)."""
+
+    model_config = SettingsConfigDict(env_prefix="HARVEST_PLANNER_")
+
+    order: OrderPolicy = Field(
+        default="nearest",
+        description="Harvest order: 'nearest' (paper: the fruit nearest the camera first) or "
+        "'planned' (the order that minimises the tool's travel over the reachable fruit, "
+        "home included; exact up to planned_exact_max fruit, else nearest neighbour + 2-opt).",
+    )
+    planned_exact_max: int = Field(
+        default=12, ge=1, le=16, description="Planned order: exact (Held-Karp) up to this many."
+    )
+    # --- the paper's poses (§IV-A, §IV-B) -----------------------------------------------------
+    security_distance_m: float = Field(
+        default=0.03,
+        gt=0,
+        le=0.1,
+        description="d_s: cutter tip above the fruit top (x_a = [x_f, y_f - d_v - d_s, z_f]); "
+        "above the cutter shaft's radius (2.2 cm) so the shaft clears the fruit, below the "
+        "peduncle's length so the tip is on it.",
+    )
+    approach_distance_m: float = Field(
+        default=0.12,
+        gt=0,
+        le=0.4,
+        description="d_z: the pre-pose is this far in front of the harvest pose along the "
+        "camera's optical axis (z_a = z_f - d_z); the dish (8.5 cm radius) must clear the fruit.",
+    )
+    basket_clearance_m: float = Field(
+        default=0.01,
+        ge=0,
+        le=0.1,
+        description="Gap between the dish rim and the fruit bottom; the dish centre is "
+        "d_s + 2 d_v + rim height + this under the cutter tip.",
+    )
+    dish_back_m: float = Field(
+        default=0.03,
+        ge=0,
+        le=0.06,
+        description="At the harvest pose the dish centre sits this far back from under the fruit, "
+        "towards the robot (along the cutter's pointing axis): a falling 4 cm fruit still lands "
+        "in the 8.5 cm dish, and fruit hanging behind and below stay out of its way, m.",
+    )
+    approach_basket_drop_m: float = Field(
+        default=0.05,
+        ge=0,
+        le=0.2,
+        description="At the pre-pose the dish is this much lower than at the harvest pose: in "
+        "front of the fruit its rim would otherwise pass within the fruit damper's safety "
+        "distance of the fruit's underside (the target is an obstacle until the harvest phase).",
+    )
+    ready_pose: Literal["home", "low"] = Field(
+        default="low",
+        description="The pose at the start, while nothing is to be done and at the end: 'home' "
+        "(the tool pose of the sim's initial posture HOME_RAD: the arms cover ~34 % of the "
+        "image, most of its lower-left quarter) or 'low' (cutter tip at (0.55, 0.15, 0.80) m "
+        "pitched 30° down and turned 90° left, the dish 0.14 m under it: ~7 %, found by a "
+        "search over tool poses, every joint ≥ 17° inside its limits; README).",
+    )
+    # --- when a phase is done ---------------------------------------------------------------
+    approach_tolerance_m: float = Field(
+        default=0.02, gt=0, description="Pre-pose reached: cutter position error below, m."
+    )
+    harvest_tolerance_m: float = Field(
+        default=0.004, gt=0, description="Harvest pose reached: cutter position error below, m."
+    )
+    relative_tolerance_m: float = Field(
+        default=0.01, gt=0, description="Dish position error (in the cutter frame) below, m."
+    )
+    orientation_tolerance_rad: float = Field(
+        default=0.05, gt=0, description="Both tools' orientation errors below, rad."
+    )
+    catch_tolerance_m: float = Field(
+        default=0.03,
+        gt=0,
+        description="The dish may stay this far from its target when a neighbour holds it back "
+        "(the controller's fruit dampers): a fruit (d_h ≤ 5 cm) still falls into the 8.5 cm "
+        "dish. Cut once the dish has settled (no progress for settle_s), m.",
+    )
+    settle_s: float = Field(
+        default=0.3, gt=0, description="No progress this long: the tools have settled, s."
+    )
+    neighbour_clearance_m: float = Field(
+        default=0.0,
+        ge=0,
+        description="Reachability in clutter: a neighbour closer than this to where the dish or "
+        "the cutter goes (harvest pose, and the move from the pre-pose) blocks the fruit, m. The "
+        "controller's fruit damper keeps d_s (2 cm) from every fruit, but the hulls are already "
+        "conservative (the dish hull, the fruit's largest semi-axis) and the scene's estimates "
+        "are off by a few mm: any margin here blocked fruit that the arms do reach (a near miss "
+        "costs a 'no progress' retry, not a collision: the controller's dampers keep d_s), m.",
+    )
+    defer_blocked: bool = Field(
+        default=True,
+        description="A fruit whose approach or harvest stops making progress is put back once "
+        "and tried again when nothing else is left (a neighbour harvested meanwhile may clear "
+        "the way); the second time it is unreachable.",
+    )
+    leave_tolerance_m: float = Field(
+        default=0.03, gt=0, description="Back at the pre-pose after a fruit: error below, m."
+    )
+    home_tolerance_m: float = Field(
+        default=0.03, gt=0, description="At the ready pose: cutter position error below, m."
+    )
+    # --- cut and collection -----------------------------------------------------------------
+    collect_timeout_s: float = Field(
+        default=1.5,
+        gt=0,
+        description="After a cut, wait this long for the basket's fruit count to go up; then "
+        "judge: fruit still on its branch (cut failed) or gone (dropped).",
+    )
+    attached_tolerance_m: float = Field(
+        default=0.03,
+        gt=0,
+        description="Cut failed when the fruit is seen, after the cut, within this of where it "
+        "was cut, m.",
+    )
+    seen_after_cut_s: float = Field(
+        default=0.4,
+        ge=0,
+        description="A sighting counts as 'still on its branch' only this long after the cut "
+        "(a cut fruit falls ~5 cm in 0.1 s).",
+    )
+    verify_s: float = Field(
+        default=1.0,
+        gt=0,
+        description="A cut not confirmed by the basket, with the fruit not seen since (the tools "
+        "hide it): the tools back out to the ready pose and look this long; seen on its branch → "
+        "the cut failed (retry), not seen → dropped, s.",
+    )
+    max_cut_attempts: int = Field(
+        default=2, ge=1, le=5, description="Cuts per fruit (the issue: retry once)."
+    )
+    # --- failure detection ------------------------------------------------------------------
+    no_progress_s: float = Field(
+        default=1.5,
+        gt=0,
+        description="A phase whose error has not improved by progress_min_m for this long is "
+        "stuck: the fruit is skipped as unreachable, s.",
+    )
+    progress_min_m: float = Field(
+        default=0.002, gt=0, description="Improvement that counts as progress, m."
+    )
+    approach_timeout_s: float = Field(default=8.0, gt=0, description="Approach phase limit, s.")
+    harvest_timeout_s: float = Field(default=5.0, gt=0, description="Harvest phase limit, s.")
+    leave_timeout_s: float = Field(
+        default=3.0, gt=0, description="Leave phase limit (then on to the next fruit), s."
+    )
+    home_timeout_s: float = Field(default=6.0, gt=0, description="Going home: limit, s.")
+    # --- fruit bookkeeping ------------------------------------------------------------------
+    replan_distance_m: float = Field(
+        default=0.015,
+        gt=0,
+        description="The target fruit's estimate moved more than this from the planned "
+        "position: re-plan the poses (a 'replanned' event); smaller changes are ignored so "
+        "perception noise does not shake the target, m.",
+    )
+    same_fruit_m: float = Field(
+        default=0.04,
+        gt=0,
+        description="A new track ID within this of a known fruit is that fruit (tracker ID "
+        "switch, or a stale duplicate), m.",
+    )
+    lost_after_frames: int = Field(
+        default=45,
+        ge=1,
+        description="A fruit not seen for this many camera frames is not selected (45 frames = "
+        "3 s). Once selected, the approach goes on to its last known position while the scene "
+        "lists it (a hand or the arm may hide it for a while); it is lost when the scene drops "
+        "it.",
+    )
+    max_losses: int = Field(
+        default=2, ge=1, description="Times a fruit may be lost before it is given up."
+    )
+    # --- reachability (IK, services/robot/reach.py) -----------------------------------------
+    reach_tolerance_m: float = Field(
+        default=0.005, gt=0, description="IK residual below which a pose is reachable, m."
+    )
+    reach_yaws_deg: tuple[float, ...] = Field(
+        default=(0.0, -25.0, 25.0, -50.0, 50.0),
+        min_length=1,
+        description="Cutter yaws tried by the IK (the paper's free θ_a), deg.",
+    )
+    reach_iterations: int = Field(default=250, ge=10, description="IK iterations per try.")
+    # --- run --------------------------------------------------------------------------------
+    startup_s: float = Field(
+        default=1.0,
+        ge=0,
+        description="Watch this long before the first selection (tracks need ~10 frames).",
+    )
+    finish_after_s: float = Field(
+        default=1.0,
+        ge=0,
+        description="At the ready pose with no fruit left for this long: the run ends, s.",
+    )
+    max_run_s: float = Field(
+        default=600.0, gt=0, description="The run ends after this much sim time whatever, s."
+    )
+    exit_when_done: bool = Field(
+        default=True, description="Stop the service once the summary is out (ends the run)."
+    )
+    scenario: str = Field(default="", description="Scenario name, copied into the summary.")
+    seed: int | None = Field(default=None, description="Scenario seed, copied into the summary.")
+
+    @model_validator(mode="after")
+    def _harvest_inside_approach(self) -> Settings:
+        if self.harvest_tolerance_m > self.approach_tolerance_m:
+            raise ValueError(
+                f"harvest_tolerance_m {self.harvest_tolerance_m} exceeds approach_tolerance_m "
+                f"{self.approach_tolerance_m}"
+            )
+        return self
+
+
+SPEC = NodeSpec(
+    inputs=("control/status", "scene/state", "robot/basket", "robot/joint_state"),
+    outputs=("plan/target", "robot/tool", "harvest/events", "harvest/summary"),
+    # One plan target per control status: the controller sees it at the next tick. Tool
+    # commands, events and the summary are extra outputs published before it.
+    answers={"control/status": ("plan/target",)},
+)
+
+
+def _make_core(settings: Settings):
+    from services.planner.core import PlannerCore
+
+    return PlannerCore(settings)
+
+
+SERVICE = ServiceDef(
+    "planner", Settings, SPEC, kind="reactive", make_core=_make_core, description=__doc__ or ""
+)

@@ -1,0 +1,442 @@
+"""`harvest bench harvest`: the whole harvest on a scenario over seeds, for each order policy.
+
+Two ways to run a seed:
+
+* ``inproc`` (default): every core (sim, detector, tracker, scene, controller, planner) in one
+  process, in lock-step order (services.runtime.inproc): the same messages as the stack without
+  process start-up and the bus, so many seeds fit in the time;
+* ``stack``: the real stack under the supervisor (one process per service, Zenoh, recorded),
+  evaluated from the recording.
+
+Evaluation uses the sim's ground truth (allowed here: it is the judge, never an input of the
+planner): a fruit is *reachable* when the IK reaches its harvest pose and pre-pose computed from
+its true centre and semi-axes (the planner's own reachability test on perfect data); the
+planner's fruit (track IDs) are matched to sim fruit by their last scene position. In clutter a
+fruit also needs an order in which every neighbour in its tools' way goes first (the planner's
+own clearance check, on the true fruit).
+"""
+
+from __future__ import annotations
+
+import statistics
+import tempfile
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from schemas.harvest import RunSummary
+from schemas.scene import SceneState
+from schemas.sim import GroundTruth
+
+CHAIN = ("detector", "tracker", "scene")
+MATCH_M = 0.06  # a track's last scene position within this of a sim fruit is that fruit
+
+
+class BenchError(RuntimeError):
+    """The benchmark cannot run (a service missing from this build, a bad seed range)."""
+
+
+@dataclass
+class Collected:
+    """What the evaluation needs from one run, whichever way it ran."""
+
+    summary: RunSummary | None = None
+    truth: GroundTruth | None = None  # the last one
+    last_position: dict[int, tuple[float, float, float]] = field(default_factory=dict)
+    sim_events: list[Any] = field(default_factory=list)
+    max_velocity_ratio: float = 0.0  # |q̇| / limit over every command
+
+    def take(self, topic: str, msg: Any) -> None:
+        if topic == "harvest/summary":
+            self.summary = msg
+        elif topic == "sim/truth":
+            self.truth = msg
+        elif topic == "scene/state":
+            s: SceneState = msg
+            for f in s.fruits:
+                if f.frames_unseen == 0:
+                    self.last_position[f.fruit_id] = f.position_world_m
+        elif topic == "sim/events":
+            self.sim_events.append(msg)
+        elif topic == "robot/command":
+            self.max_velocity_ratio = max(self.max_velocity_ratio, _velocity_ratio(msg))
+
+
+def _velocity_ratio(cmd: Any) -> float:
+    from services.robot.model import velocity_limits_rad_s
+
+    lim = velocity_limits_rad_s()
+    return max(
+        (abs(v) / lim[i] for arm in cmd.arms.values() for i, v in enumerate(arm.velocity_rad_s)),
+        default=0.0,
+    )
+
+
+def parse_seeds(text: str) -> list[int]:
+    """'3' → [3]; '0-19' → [0..19]; '1,4,9' → [1, 4, 9]."""
+    out: list[int] = []
+    try:
+        for part in text.split(","):
+            if "-" in part:
+                a, b = (int(x) for x in part.split("-", 1))
+                if b < a:
+                    raise BenchError(f"--seeds {text!r}: {b} < {a}")
+                out += list(range(a, b + 1))
+            else:
+                out.append(int(part))
+    except ValueError:
+        raise BenchError(f"--seeds {text!r}: use A-B, A,B,C or A") from None
+    return out
+
+
+# ---- one run, in process -------------------------------------------------------------------
+NodeFactory = Callable[[], list[Any]]  # → InprocNode list standing between sim and controller
+
+
+def perception_chain(overrides: dict[str, dict[str, Any]] | None = None) -> list[Any]:
+    """Detector, tracker and scene cores from the registry (their default settings)."""
+    from services.registry import SERVICE_MODULES, service_def
+    from services.runtime.inproc import InprocNode
+    from services.runtime.settings import load_settings
+
+    missing = [n for n in CHAIN if n not in SERVICE_MODULES]
+    if missing:
+        raise BenchError(
+            f"the harvest needs the perception chain; not in this build: {', '.join(missing)}"
+        )
+    nodes = []
+    for name in CHAIN:
+        sd = service_def(name)
+        assert sd.make_core is not None
+        core = sd.make_core(load_settings(sd.settings, (overrides or {}).get(name, {})))
+        nodes.append(InprocNode(name, sd.spec.inputs, core))
+    return nodes
+
+
+def run_inproc(
+    sim_settings: dict[str, Any],
+    planner_settings: dict[str, Any],
+    max_s: float,
+    perception: NodeFactory | None = None,
+    controller_settings: dict[str, Any] | None = None,
+) -> tuple[Collected, float, float]:
+    """One run in one process; returns what was collected, sim seconds and wall seconds."""
+    from services.controller import SERVICE as CTRL
+    from services.planner import SERVICE as PLAN
+    from services.runtime.inproc import InprocGraph, InprocNode
+    from services.runtime.settings import load_settings
+    from services.sim import SERVICE as SIM
+
+    assert SIM.make_core and CTRL.make_core and PLAN.make_core
+    sim = SIM.make_core(load_settings(SIM.settings, sim_settings))
+    ctrl = CTRL.make_core(
+        load_settings(CTRL.settings, {"publish_diagnostics": False, **(controller_settings or {})})
+    )
+    plan = PLAN.make_core(load_settings(PLAN.settings, planner_settings))
+    got = Collected()
+    nodes = [
+        *(perception or perception_chain)(),
+        InprocNode("controller", CTRL.spec.inputs, ctrl),
+        InprocNode("planner", PLAN.spec.inputs, plan),
+    ]
+    graph = InprocGraph("sim", sim, SIM.spec.inputs, nodes, lambda _s, t, m: got.take(t, m))
+    t0 = time.perf_counter()
+    ticks = graph.run(plan.done, int(max_s * 1e9 / sim.s.control_period_ns))
+    wall = time.perf_counter() - t0
+    sim.close()
+    return got, ticks * sim.s.control_period_ns * 1e-9, wall
+
+
+# ---- one run, as the real stack -------------------------------------------------------------
+def run_stack(
+    sim_settings: dict[str, Any], planner_settings: dict[str, Any], workdir: Path, run_id: str
+) -> tuple[Collected, float, float]:
+    """One run of the real stack (supervisor, processes, bus, recorder); evaluated from the
+    recording. Endpoint: a unix socket in ``workdir``."""
+    import yaml
+
+    from schemas.topics import TOPICS
+    from services.recorder.inspect import iter_messages
+    from services.supervisor.stack import load_stack
+    from services.supervisor.supervisor import Supervisor
+
+    stack_file = workdir / f"{run_id}.yaml"
+    stack_file.write_text(
+        yaml.safe_dump(
+            {
+                "name": f"bench-{run_id}",
+                "mode": "lockstep",
+                "master": "sim",
+                "router": {"listen": [f"unixsock-stream/{workdir}/{run_id}.sock"]},
+                "recording": {"enabled": True, "dir": str(workdir)},
+                "services": {
+                    "sim": {"settings": sim_settings},
+                    **{n: {} for n in CHAIN},
+                    "controller": {"settings": {"publish_diagnostics": False}},
+                    "planner": {"main": True, "settings": planner_settings},
+                },
+            }
+        )
+    )
+    sup = Supervisor(load_stack(stack_file), stack_file, run_id, quiet=True)
+    t0 = time.perf_counter()
+    result = sup.run()
+    wall = time.perf_counter() - t0
+    if result.exit_code != 0 or result.mcap is None:
+        raise BenchError(f"stack run {run_id} failed: {result.failure} (log {result.log})")
+    got = Collected()
+    last_stamp = 0
+    for m in iter_messages(result.mcap):
+        t = TOPICS.get(m.topic)
+        if t is None or m.derived:
+            continue
+        msg = t.codec.decode(m.payload)
+        got.take(m.topic, msg)
+        last_stamp = max(last_stamp, msg.header.stamp_ns)
+    return got, last_stamp * 1e-9, wall
+
+
+# ---- evaluation ------------------------------------------------------------------------------
+@dataclass
+class Truth:
+    """Per sim fruit: whether it can be harvested at all (see ``truth_reachability``), and why
+    not."""
+
+    reachable: dict[int, bool]
+    why: dict[int, str]
+
+
+def truth_reachability(truth: GroundTruth, planner_settings: dict[str, Any]) -> Truth:
+    """A fruit is reachable when the IK reaches its harvest pose and pre-pose (true centre and
+    semi-axes) and there is an order in which every fruit in its tools' way is harvested before
+    it (``clutter.blockers`` with the planner's clearance; fixpoint from the free ones)."""
+    from services.planner import SERVICE as PLAN
+    from services.planner import Settings as PlannerSettings
+    from services.planner.clutter import blockers
+    from services.planner.core import PlannerCore
+    from services.planner.poses import FruitShape, harvest_pose, pre_pose
+    from services.runtime.settings import load_settings
+
+    settings = load_settings(PLAN.settings, planner_settings)
+    assert isinstance(settings, PlannerSettings)
+    core = PlannerCore(settings)  # its IK and pose settings
+    ps = core.machine.pose_settings
+    shapes = {
+        f.fruit_id: FruitShape(np.array(f.position_world_m), f.semi_axes_m[0], f.semi_axes_m[2])
+        for f in truth.fruits
+    }
+    why: dict[int, str] = {}
+    ik_ok: set[int] = set()
+    for i, shape in shapes.items():
+        h, p = harvest_pose(shape, ps), pre_pose(shape, ps)
+        if core.kin.reach(h.tip_world_m, h.basket_below_m).reachable and (
+            core.kin.reach(p.tip_world_m, p.basket_below_m).reachable
+        ):
+            ik_ok.add(i)
+        else:
+            why[i] = "IK"
+    done: set[int] = set()
+    changed = True
+    while changed:
+        changed = False
+        for i in sorted(ik_ok - done):
+            others = [k for k in sorted(shapes) if k != i and k not in done]
+            hit = blockers(
+                shapes[i], [shapes[k] for k in others], ps, settings.neighbour_clearance_m
+            )
+            if not hit:
+                done.add(i)
+                changed = True
+    for i in sorted(ik_ok - done):
+        why[i] = "blocked"
+    return Truth({i: i in done for i in sorted(shapes)}, why)
+
+
+def evaluate(
+    got: Collected, first_truth: GroundTruth, planner_settings: dict[str, Any]
+) -> dict[str, Any]:
+    """Figures of one run against the truth (the first frame's fruit, before any cut)."""
+    s, last = got.summary, got.truth
+    judged = truth_reachability(first_truth, planner_settings)
+    reach = judged.reachable
+    centres = {f.fruit_id: np.array(f.position_world_m) for f in first_truth.fruits}
+    outcome: dict[int, str] = {}  # sim fruit → the planner's outcome
+    for r in s.fruits if s is not None else ():
+        p = got.last_position.get(r.fruit_id)
+        if p is None:
+            continue
+        d = {i: float(np.linalg.norm(c - np.array(p))) for i, c in centres.items()}
+        i = min(d, key=lambda k: (d[k], k))
+        if d[i] <= MATCH_M:
+            outcome.setdefault(i, r.outcome)
+    collected = {e.fruit_id for e in got.sim_events if e.kind == "collected"}
+    reachable = sorted(i for i, ok in reach.items() if ok)
+    unreachable = sorted(i for i, ok in reach.items() if not ok)
+    detected = sorted(outcome)
+    reported_unreachable = {i for i, o in outcome.items() if o == "unreachable"}
+    cycles = [
+        r.duration_s
+        for r in (s.fruits if s is not None else ())
+        if r.outcome == "harvested" and r.duration_s is not None
+    ]
+    harvested_reachable = len(collected & set(reachable))
+    counters = last.counters if last is not None else None
+    return {
+        "fruit": len(reach),
+        "reachable": len(reachable),
+        "detected": len(detected),
+        "reachable_detected": len(set(reachable) & set(detected)),
+        "harvested": len(collected),
+        "harvested_reachable": harvested_reachable,
+        "success_rate": harvested_reachable / len(reachable) if reachable else 1.0,
+        "unreachable_true": len(unreachable),
+        "unreachable_blocked": sum(1 for i in unreachable if judged.why.get(i) == "blocked"),
+        "unreachable_reported": len(reported_unreachable),
+        "unreachable_correct": len(reported_unreachable & set(unreachable)),
+        "reachable_called_unreachable": len(reported_unreachable - set(unreachable)),
+        "dropped": sum(1 for e in got.sim_events if e.kind == "dropped"),
+        "collisions": counters.contacts if counters is not None else None,
+        "contact_ticks": counters.contact_ticks if counters is not None else None,
+        "commands_clamped": counters.commands_clamped if counters is not None else None,
+        "max_velocity_ratio": round(got.max_velocity_ratio, 4),
+        "cycles_s": [round(c, 3) for c in cycles],
+        "summary": s.model_dump(mode="json", exclude={"header"}) if s is not None else None,
+    }
+
+
+# ---- the benchmark ---------------------------------------------------------------------------
+@dataclass
+class BenchConfig:
+    scenario: str
+    seeds: list[int]
+    orders: Sequence[str] = ("nearest", "planned")
+    fruit_count: int | None = None
+    mode: str = "inproc"
+    max_s: float = 240.0
+    perception: NodeFactory | None = None  # tests: a stand-in chain
+
+
+def run_harvest_bench(
+    cfg: BenchConfig, progress: Callable[[str], None] | None = None
+) -> dict[str, Any]:
+    runs: list[dict[str, Any]] = []
+    workdir = Path(tempfile.mkdtemp(prefix="bench-harvest-"))
+    for order in cfg.orders:
+        for seed in cfg.seeds:
+            sim_s: dict[str, Any] = {"scenario": cfg.scenario, "seed": seed}
+            if cfg.fruit_count is not None:
+                sim_s["fruit_count"] = cfg.fruit_count
+            plan_s = {"order": order, "scenario": cfg.scenario, "seed": seed}
+            if cfg.mode == "stack":
+                got, sim_t, wall = run_stack(sim_s, plan_s, workdir, f"{order}-{seed}")
+            else:
+                got, sim_t, wall = run_inproc(sim_s, plan_s, cfg.max_s, cfg.perception)
+            row = {"order": order, "seed": seed, "sim_s": round(sim_t, 3), "wall_s": round(wall, 2)}
+            row["rtf"] = round(sim_t / wall, 3) if wall > 0 else None
+            row.update(evaluate(got, _first_truth(sim_s), plan_s))
+            runs.append(row)
+            if progress is not None:
+                progress(
+                    f"{order} seed {seed}: {row['harvested']}/{row['reachable']} harvested, "
+                    f"{row['collisions']} collisions, {sim_t:.1f} s sim in {wall:.0f} s"
+                )
+    return {
+        "scenario": cfg.scenario,
+        "seeds": cfg.seeds,
+        "mode": cfg.mode,
+        "fruit_count": cfg.fruit_count,
+        "policies": {o: aggregate([r for r in runs if r["order"] == o]) for o in cfg.orders},
+        "runs": runs,
+    }
+
+
+def _first_truth(sim_s: dict[str, Any]) -> GroundTruth:
+    """The truth of the scenario's first frame (every fruit on the tree), from a fresh sim."""
+    from services.runtime.settings import load_settings
+    from services.sim import SERVICE as SIM
+
+    assert SIM.make_core is not None
+    sim = SIM.make_core(load_settings(SIM.settings, sim_s))
+    try:
+        (group, *_rest) = sim.emit()
+        return next(m for t, m in group if t == "sim/truth")
+    finally:
+        sim.close()
+
+
+def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """Totals over seeds for one policy."""
+    if not rows:
+        return {}
+    tot = {
+        k: sum(r[k] or 0 for r in rows)
+        for k in (
+            "fruit",
+            "reachable",
+            "detected",
+            "reachable_detected",
+            "harvested",
+            "harvested_reachable",
+            "unreachable_true",
+            "unreachable_blocked",
+            "unreachable_reported",
+            "unreachable_correct",
+            "reachable_called_unreachable",
+            "dropped",
+            "collisions",
+            "commands_clamped",
+        )
+    }
+    cycles = [c for r in rows for c in r["cycles_s"]]
+    sim_s, wall_s = sum(r["sim_s"] for r in rows), sum(r["wall_s"] for r in rows)
+    return {
+        **tot,
+        "runs": len(rows),
+        "success_rate": tot["harvested_reachable"] / tot["reachable"] if tot["reachable"] else 1.0,
+        "unreachable_identified": (
+            tot["unreachable_correct"] / tot["unreachable_true"] if tot["unreachable_true"] else 1.0
+        ),
+        "median_s_per_fruit": statistics.median(cycles) if cycles else None,
+        "s_per_fruit_total": sim_s / tot["harvested"] if tot["harvested"] else None,
+        "max_velocity_ratio": max(r["max_velocity_ratio"] for r in rows),
+        "sim_s": round(sim_s, 2),
+        "wall_s": round(wall_s, 1),
+        "rtf": round(sim_s / wall_s, 3) if wall_s else None,
+    }
+
+
+def table(result: dict[str, Any]) -> str:
+    """A plain-text table of the per-policy figures."""
+    keys = (
+        ("harvested", "harvested"),
+        ("reachable", "reachable (truth)"),
+        ("success_rate", "success rate"),
+        ("unreachable_correct", "unreachable identified"),
+        ("unreachable_true", "unreachable (truth)"),
+        ("unreachable_blocked", "  of which blocked by fruit"),
+        ("reachable_called_unreachable", "reachable called unreachable"),
+        ("dropped", "dropped"),
+        ("collisions", "collisions (sim contacts)"),
+        ("median_s_per_fruit", "median s per harvested fruit"),
+        ("s_per_fruit_total", "run s per harvested fruit"),
+        ("max_velocity_ratio", "peak |q̇| / limit"),
+        ("commands_clamped", "commands clamped by the sim"),
+        ("wall_s", "wall s"),
+        ("rtf", "real-time factor"),
+    )
+    pols = result["policies"]
+    lines = [
+        f"{result['scenario']} seeds {result['seeds'][0]}-{result['seeds'][-1]} ({result['mode']})",
+        f"{'':34}" + "".join(f"{o:>14}" for o in pols),
+    ]
+    for k, label in keys:
+        cells = []
+        for o in pols:
+            v = pols[o].get(k)
+            cells.append(f"{v:14.3f}" if isinstance(v, float) else f"{v!s:>14}")
+        lines.append(f"{label:34}" + "".join(cells))
+    return "\n".join(lines)

@@ -1,0 +1,180 @@
+"""The planner's book of fruit: one record per physical fruit, kept from the scene's persistent
+list, with the identity rules the harvest needs.
+
+* A record is keyed by the first track ID it had. A new ID within ``same_fruit_m`` of a record
+  that is finished, or that is not seen now while the new ID is, is that record (a tracker ID
+  switch, or a stale duplicate of a fruit already dealt with): the record takes the new ID and
+  keeps the old ones (all of them are ignored together by the controller while cutting).
+* A fruit last seen inside the robot's own dish is not a fruit on the tree (a collected fruit
+  seen in the basket): it is marked ``in_basket`` and never selected.
+* The planning position of a record changes only when the estimate moves more than
+  ``replan_m`` from it: perception noise does not shake the targets; a real move re-plans.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from schemas.harvest import FruitOutcome
+from schemas.scene import Fruit, SceneState
+from services.planner.kinematics import DishPose, ReachVerdict
+from services.planner.poses import FruitShape
+from services.robot.model import TOOLS
+
+
+@dataclass
+class FruitRecord:
+    """One physical fruit as the planner sees it."""
+
+    key: int  # first track ID
+    fruit_id: int  # current track ID
+    ids: list[int]
+    seen: Fruit  # latest scene entry
+    planned: FruitShape  # the position and size the poses are computed from
+    in_scene: bool = True
+    in_basket: bool = False
+    outcome: FruitOutcome | None = None  # None: still to do
+    reason: str = ""
+    started_ns: int | None = None  # first selection
+    finished_ns: int | None = None  # end of the cycle that settled it
+    attempt_ns: int | None = None  # start of the current attempt
+    spent_ns: int = 0  # sim time the tools spent on it, over every attempt
+    deferred: bool = False  # blocked once: retried when nothing else is left
+    cuts: int = 0
+    losses: int = 0
+    frozen: bool = False  # cutting or leaving: the planning position no longer follows the scene
+    planned_whole: bool = False  # ``planned`` comes from a whole view (no side cut, fresh)
+    reach: tuple[ReachVerdict, ReachVerdict] | None = None  # harvest pose, pre-pose
+
+    @property
+    def finished(self) -> bool:
+        return self.outcome is not None
+
+    def unseen_frames(self) -> int:
+        return self.seen.frames_unseen
+
+
+def shape_of(f: Fruit) -> FruitShape:
+    return FruitShape(np.array(f.position_world_m, float), f.semi_axis_h_m, f.semi_axis_v_m)
+
+
+@dataclass
+class FruitBook:
+    """Records by key, the ID map, and the dish poses at recent camera stamps."""
+
+    same_fruit_m: float
+    replan_m: float
+    records: dict[int, FruitRecord] = field(default_factory=dict)
+    id_to_key: dict[int, int] = field(default_factory=dict)
+    dish_at: dict[int, DishPose] = field(default_factory=dict)  # camera stamp → dish
+    switches: list[tuple[int, int, int]] = field(default_factory=list)  # (key, old, new)
+    moved: list[tuple[int, float]] = field(default_factory=list)  # (key, metres)
+
+    def update(self, scene: SceneState, in_dish: Callable[[Fruit], bool]) -> None:
+        """Take one scene state: new IDs, switches, positions, what is in the scene now."""
+        now = {f.fruit_id: f for f in scene.fruits}
+        present: set[int] = set()
+        for fid in sorted(now):
+            f = now[fid]
+            key = self.id_to_key.get(fid)
+            if key is None:
+                key = self._identify(f, now)
+            rec = self.records[key]
+            present.add(key)
+            current = now.get(rec.fruit_id)
+            if fid != rec.fruit_id and (current is None or f.frames_unseen < current.frames_unseen):
+                self._switch(rec, fid)
+            if fid == rec.fruit_id:
+                self._observe(rec, f, in_dish)
+        for key in sorted(self.records):
+            self.records[key].in_scene = key in present
+
+    def _identify(self, f: Fruit, now: dict[int, Fruit]) -> int:
+        """The record a new track ID belongs to (a new record if none)."""
+        p = np.array(f.position_world_m, float)
+        for key in sorted(self.records):
+            rec = self.records[key]
+            if np.linalg.norm(rec.planned.centre_world_m - p) > self.same_fruit_m:
+                continue
+            current = now.get(rec.fruit_id)
+            taken_over = current is None or current.frames_unseen > f.frames_unseen
+            if rec.finished or taken_over:
+                self.id_to_key[f.fruit_id] = key
+                rec.ids.append(f.fruit_id)
+                return key
+        self.records[f.fruit_id] = FruitRecord(
+            f.fruit_id, f.fruit_id, [f.fruit_id], f, shape_of(f), planned_whole=_whole(f)
+        )
+        self.id_to_key[f.fruit_id] = f.fruit_id
+        return f.fruit_id
+
+    def _switch(self, rec: FruitRecord, new_id: int) -> None:
+        self.switches.append((rec.key, rec.fruit_id, new_id))
+        rec.fruit_id = new_id
+
+    def _observe(self, rec: FruitRecord, f: Fruit, in_dish: Callable[[Fruit], bool]) -> None:
+        rec.seen = f
+        if rec.finished or rec.frozen:
+            return
+        if f.frames_unseen == 0 and in_dish(f):
+            rec.in_basket = True
+        whole = _whole(f)
+        if rec.planned_whole and not whole:
+            return  # a cut or stale view does not move a target planned from a whole one
+        shape = shape_of(f)
+        d = float(np.linalg.norm(shape.centre_world_m - rec.planned.centre_world_m))
+        if d > self.replan_m or (whole and not rec.planned_whole):
+            rec.planned = shape
+            rec.reach = None
+            rec.planned_whole = whole
+            if d > self.replan_m:
+                self.moved.append((rec.key, d))
+
+    def candidates(self, max_unseen: int) -> list[FruitRecord]:
+        """Records still to do, in the scene, seen recently, not in the basket, by key; fruit
+        deferred as blocked only when no other is left."""
+        ok = [
+            r
+            for _, r in sorted(self.records.items())
+            if not r.finished
+            and r.in_scene
+            and not r.in_basket
+            and r.seen.frames_unseen <= max_unseen
+            and r.seen.status not in ("harvested", "unreachable")
+        ]
+        fresh = [r for r in ok if not r.deferred]
+        return fresh or ok
+
+    def ignore_ids(self, rec: FruitRecord | None) -> tuple[int, ...]:
+        """IDs the controller need not avoid: the target's (all of them) while the tools touch
+        it, fruit seen in the basket, and fruit known to be off the tree (harvested, dropped):
+        the scene may still list them where they were last seen."""
+        ids: list[int] = list(rec.ids) if rec is not None else []
+        for _, r in sorted(self.records.items()):
+            if r.in_basket or r.outcome in ("harvested", "dropped"):
+                ids += r.ids
+        return tuple(sorted(set(ids)))
+
+    def detected(self) -> list[FruitRecord]:
+        """Every physical fruit seen on the tree (fruit seen only in the basket left out)."""
+        return [r for _, r in sorted(self.records.items()) if not r.in_basket]
+
+
+def _whole(f: Fruit) -> bool:
+    """A fresh estimate with no side cut (the scene's flags): the best the scene gives."""
+    return not f.flags and f.frames_unseen == 0
+
+
+def inside_dish(p_world_m: np.ndarray, dish: DishPose, margin_m: float) -> bool:
+    """A fruit centre inside the dish: within its radius, between the floor and the rim top
+    (+ margin). A fruit resting in the dish has its centre d_v (≤ 5 cm) above the floor; the
+    fruit hanging over the dish at the harvest pose has it rim + clearance + d_v (≥ 8.5 cm)
+    above, so the target is never taken for a fruit in the basket."""
+    rel = np.asarray(p_world_m, float) - dish.centre_world_m
+    h = float(rel @ dish.normal_world)
+    radial = float(np.linalg.norm(rel - h * dish.normal_world))
+    top = TOOLS.basket_rim_height_m + margin_m
+    return radial <= TOOLS.basket_radius_m + margin_m and -margin_m <= h <= top

@@ -1,0 +1,177 @@
+"""Pure core of the planner: scene states, basket readings and joint states are state; each
+control status is answered with one plan target, after the tool commands, harvest events and
+(once, at the end) the run summary that the same tick produced. No wall clock, no randomness:
+every output is a function of the inputs (the IK is deterministic and cached per pose)."""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import numpy as np
+
+from schemas.control import ControlStatus
+from schemas.harvest import HarvestEvent
+from schemas.robot import BasketState, JointState, ToolCommand
+from schemas.scene import Fruit, SceneState
+from services.planner import Settings
+from services.planner.book import FruitBook, inside_dish
+from services.planner.kinematics import Kinematics
+from services.planner.machine import Goal, Machine
+from services.planner.poses import PoseSettings, plan_target
+from services.planner.summary import run_summary
+from services.runtime import Output, Stamper
+
+log = logging.getLogger("planner")
+NAME = "planner"
+DISH_HISTORY = 32  # camera stamps whose dish pose is kept (a fruit is judged at its sighting)
+IN_DISH_MARGIN_M = 0.02
+
+
+class PlannerCore:
+    """See the package README for inputs, outputs, settings and the state machine."""
+
+    def __init__(self, settings: Settings) -> None:
+        s = self.s = settings
+        self.kin = Kinematics(
+            s.reach_yaws_deg, s.reach_iterations, s.reach_tolerance_m, s.ready_pose
+        )
+        self.book = FruitBook(s.same_fruit_m, s.replan_distance_m)
+        self.machine = Machine(
+            s,
+            self.book,
+            self.kin,
+            PoseSettings(
+                s.security_distance_m,
+                s.approach_distance_m,
+                s.basket_clearance_m,
+                s.approach_basket_drop_m,
+                self.kin.camera_axis_world,
+                s.dish_back_m,
+            ),
+        )
+        self.stamper = Stamper(NAME)
+        self.targets_sent = 0
+        self.basket_count: int | None = None
+        self.pending_scene: SceneState | None = None
+        self.contacts = 0  # robot-side: the controller's distance model reached contact
+        self._in_contact = False
+        self.summary_sent = False
+        self.refused: dict[str, int] = {}
+
+    # ---- inputs ------------------------------------------------------------------------------
+    def handle(self, topic: str, msg: Any) -> list[Output]:
+        if topic == "scene/state":
+            self.pending_scene = msg  # used at the next status, once its joint state is in
+            return []
+        if topic == "robot/basket":
+            self._on_basket(msg)
+            return []
+        if topic == "robot/joint_state":
+            self._on_joint_state(msg)
+            return []
+        if topic == "control/status":
+            return self._on_status(msg)
+        return []
+
+    def done(self) -> bool:
+        """True once the summary is out (the runtime then stops the service: the run ends)."""
+        return self.summary_sent and self.s.exit_when_done
+
+    def _on_basket(self, msg: BasketState) -> None:
+        if self.basket_count is not None and msg.fruit_count < self.basket_count:
+            self._refuse(
+                "robot/basket", f"fruit count went down {self.basket_count} → {msg.fruit_count}"
+            )
+            return
+        self.basket_count = msg.fruit_count
+
+    def _on_joint_state(self, js: JointState) -> None:
+        scene = self.pending_scene
+        if scene is None or js.header.stamp_ns != scene.header.stamp_ns:
+            return  # only the dish at camera stamps is needed (fruit are seen at those)
+        dish = self.kin.dish(js)
+        if dish is None:
+            self._refuse("robot/joint_state", "an arm or a joint is missing")
+            return
+        self.book.dish_at[js.header.stamp_ns] = dish
+        for old in sorted(self.book.dish_at)[:-DISH_HISTORY]:
+            del self.book.dish_at[old]
+
+    def _in_dish(self, f: Fruit) -> bool:
+        dish = self.book.dish_at.get(f.last_seen_stamp_ns)
+        if dish is None:
+            return False
+        return inside_dish(np.array(f.position_world_m, float), dish, IN_DISH_MARGIN_M)
+
+    def _refuse(self, topic: str, why: str) -> None:
+        n = self.refused.get(topic, 0)
+        self.refused[topic] = n + 1
+        if n == 0:
+            log.warning("%s refused: %s (later ones are only counted)", topic, why)
+
+    # ---- the tick ----------------------------------------------------------------------------
+    def _on_status(self, st: ControlStatus) -> list[Output]:
+        now = st.header.stamp_ns
+        if self.pending_scene is not None:
+            self.book.update(self.pending_scene, self._in_dish)
+            self.pending_scene = None
+        self._count_contacts(st)
+        m = self.machine
+        goal = m.step(now, st, self.targets_sent, self.basket_count)
+        out: list[Output] = []
+        for action, fruit_id in m.tools:
+            out.append(
+                (
+                    "robot/tool",
+                    ToolCommand(
+                        header=self.stamper.header("robot/tool", now, "cutter_tip"),
+                        tool="cutter",
+                        action=action,  # type: ignore[arg-type]
+                        fruit_id=fruit_id,
+                    ),
+                )
+            )
+        for e in m.events:
+            out.append(
+                (
+                    "harvest/events",
+                    HarvestEvent(
+                        header=self.stamper.header("harvest/events", now),
+                        event=e.event,
+                        fruit_id=e.fruit_id,
+                        phase_from=e.phase_from,
+                        phase_to=e.phase_to,
+                        reason=e.reason,
+                        outcome=e.outcome,
+                    ),
+                )
+            )
+        m.tools.clear()
+        m.events.clear()
+        if m.finished and not self.summary_sent:
+            summary = run_summary(
+                self.stamper.header("harvest/summary", now),
+                self.s,
+                self.book,
+                self.contacts,
+                now,
+            )
+            out.append(("harvest/summary", summary))
+            self.summary_sent = True
+        out.append(("plan/target", self._target(st, goal)))
+        return out
+
+    def _target(self, st: ControlStatus, goal: Goal) -> Any:
+        self.targets_sent += 1
+        header = self.stamper.answer("plan/target", st.header, frame_id="world")
+        return plan_target(header, goal.phase, goal.poses, goal.fruit_id, goal.ignore)
+
+    def _count_contacts(self, st: ControlStatus) -> None:
+        """Contacts by the controller's own distance model (robot-side; the sim's contact count
+        is for evaluation): an episode begins when a trunk or fruit distance goes below 0."""
+        ds = [d for d in (st.min_distance_trunk_m, st.min_distance_fruit_m) if d is not None]
+        touching = bool(ds) and min(ds) < 0.0
+        if touching and not self._in_contact:
+            self.contacts += 1
+        self._in_contact = touching

@@ -1,0 +1,567 @@
+"""The harvest state machine (paper §IV-B, §IV-C): one step per control status.
+
+    idle ──(startup)──▶ select ──▶ approach ──▶ harvest ──▶ cut ──▶ leave ──▶ select …
+                          │            │            │         │  └─(cut failed, retry)─▶ harvest
+                          ▼            └─ lost / stuck: skip ─┘
+                         home ──(nothing left for finish_after_s)──▶ done
+
+* **select**: the next fruit by the order policy among the candidates; a fruit whose harvest
+  pose or pre-pose the IK cannot reach is skipped as unreachable right there.
+* **approach**: the cutter to the pre-pose (d_z in front along the optical axis); the target
+  fruit is an obstacle. Lost (unseen too long) → back to select; stuck or timed out → skipped
+  as unreachable.
+* **harvest**: the cutter tip to the peduncle, the dish under the fruit; the fruit may be
+  touched (``ignore_fruit_ids``). Stuck or timed out → unreachable, leave.
+* **cut**: one tool command, then wait for the basket's fruit count to go up (collected).
+  After ``collect_timeout_s``: the fruit still seen on its branch → the cut failed: retry
+  (harvest again) up to ``max_cut_attempts``, then give up (cut_failed); gone → dropped.
+* **leave**: back to the pre-pose of that fruit, then select.
+* **home**: nothing to do: the ready pose; the run ends after ``finish_after_s`` there with no
+  candidate (or at ``max_run_s``).
+
+Progress: each phase keeps the best task error seen on statuses of its own targets; no
+improvement by ``progress_min_m`` for ``no_progress_s`` is "stuck". Statuses of older targets
+(the first tick after a switch) and holding statuses do not count as progress.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from schemas.control import ControlStatus, HarvestPhase
+from schemas.harvest import FruitOutcome, HarvestEventKind
+from services.planner import Settings
+from services.planner.book import FruitBook, FruitRecord
+from services.planner.clutter import blockers
+from services.planner.kinematics import Kinematics
+from services.planner.order import nearest_first, planned_order
+from services.planner.poses import PoseSettings, ToolPoses, harvest_pose, pre_pose
+
+NS = 1_000_000_000
+
+
+@dataclass(frozen=True)
+class Event:
+    """A harvest event before it becomes a message."""
+
+    event: HarvestEventKind
+    fruit_id: int | None = None
+    phase_from: str = ""
+    phase_to: str = ""
+    reason: str = ""
+    outcome: FruitOutcome | None = None  # set when the event settles the fruit
+
+
+@dataclass(frozen=True)
+class Goal:
+    """What to send this tick: the phase, the poses (None: hold), the fruit, ignored IDs."""
+
+    phase: HarvestPhase
+    poses: ToolPoses | None
+    fruit_id: int | None = None
+    ignore: tuple[int, ...] = ()
+
+
+@dataclass
+class CutState:
+    """One cut: when, the basket count before it, where the fruit was."""
+
+    stamp_ns: int
+    basket_before: int
+    centre_world_m: np.ndarray
+
+
+@dataclass
+class Progress:
+    """Best task error of the current phase and when it last improved."""
+
+    since_ns: int
+    first_target_seq: int
+    best_m: float = float("inf")
+    best_ns: int = 0
+
+    def note(self, st: ControlStatus, now_ns: int, min_gain_m: float) -> None:
+        if st.target_seq is None or st.target_seq < self.first_target_seq or st.reason:
+            return
+        err = st.abs_position_error_m + st.rel_position_error_m
+        if err < self.best_m - min_gain_m:
+            self.best_m, self.best_ns = err, now_ns
+
+    def stuck(self, now_ns: int, after_s: float) -> bool:
+        ref = self.best_ns if self.best_m < float("inf") else self.since_ns
+        return now_ns - ref > after_s * NS
+
+
+@dataclass
+class Machine:
+    """Phases and transitions; the book and the kinematics are shared with the core."""
+
+    s: Settings
+    book: FruitBook
+    kin: Kinematics
+    pose_settings: PoseSettings
+    phase: HarvestPhase = "idle"
+    target: FruitRecord | None = None
+    progress: Progress = field(default_factory=lambda: Progress(0, 0))
+    cut: CutState | None = None
+    verify: CutState | None = None  # an unconfirmed cut being checked from the ready pose
+    arrived_ns: int | None = None  # when the ready pose was reached while verifying
+    looking: bool = False  # verifying: backed out to the pre-pose, now going to look
+    home_since_ns: int | None = None
+    last_tip_world_m: np.ndarray | None = None
+    events: list[Event] = field(default_factory=list)
+    tools: list[tuple[str, int | None]] = field(default_factory=list)  # (action, fruit_id)
+    finished: bool = False
+    started: bool = False
+    next_seq: int = 0
+
+    # ---- one tick ----------------------------------------------------------------------------
+    def step(self, now_ns: int, st: ControlStatus, next_seq: int, basket: int | None) -> Goal:
+        """Advance on one control status; ``next_seq`` is the seq the returned goal will carry;
+        ``basket`` the latest fruit count of the load cell (None: no reading yet)."""
+        self.next_seq = next_seq
+        if not self.started:
+            self.started = True
+            self.events.append(Event("run_started", phase_to="idle"))
+        self.progress.note(st, now_ns, self.s.progress_min_m)
+        self._note_switches_and_moves()
+        if self.phase != "done" and now_ns >= self.s.max_run_s * NS:
+            self._end_run(now_ns, f"run time limit {self.s.max_run_s:.0f} s")
+        handler = {
+            "idle": self._idle,
+            "approach": self._approach,
+            "harvest": self._harvest,
+            "cut": self._cut,
+            "leave": self._leave,
+            "home": self._home,
+            "done": lambda now, st, basket: None,
+        }[self.phase]
+        handler(now_ns, st, basket)
+        return self.goal()
+
+    def goal(self) -> Goal:
+        rec = self.target
+        if self.phase in ("idle", "home", "done") or rec is None:
+            return Goal(self.phase, self._ready(), ignore=self.book.ignore_ids(None))
+        touching = self.phase in ("harvest", "cut", "leave")
+        if self.verify is not None and self.looking:  # at the pre-pose: on to look from afar
+            return Goal(self.phase, self._ready(), rec.fruit_id, self.book.ignore_ids(None))
+        poses = pre_pose if self.phase in ("approach", "leave") else harvest_pose
+        return Goal(
+            self.phase,
+            poses(rec.planned, self.pose_settings),
+            rec.fruit_id,
+            self.book.ignore_ids(rec if touching else None),
+        )
+
+    # ---- phases ------------------------------------------------------------------------------
+    def _idle(self, now: int, st: ControlStatus, basket: int | None) -> None:
+        if now >= self.s.startup_s * NS:
+            self._select(now)
+
+    def _approach(self, now: int, st: ControlStatus, basket: int | None) -> None:
+        rec = self.target
+        assert rec is not None
+        if not rec.in_scene:
+            rec.losses += 1
+            why = f"left the scene during the approach (last seen {rec.seen.frames_unseen} "
+            why += "frames before)"
+            if rec.losses >= self.s.max_losses:
+                self._finish(rec, now, "lost", f"{why}, {rec.losses} times")
+                self.events.append(Event("fruit_lost", rec.fruit_id, outcome="lost", reason=why))
+            else:
+                self.events.append(Event("fruit_lost", rec.fruit_id, reason=f"{why}; may retry"))
+            self._end_attempt(rec, now)
+            self.target = None
+            self._select(now)
+            return
+        if self._reached(st, self.s.approach_tolerance_m, self.s.catch_tolerance_m):
+            self._enter("harvest", now)
+            return
+        # A pre-pose nearly reached whose dish a neighbour holds back: try the harvest pose
+        # (the fruit may still be caught; the harvest phase judges).
+        near = self._reached(st, 2 * self.s.approach_tolerance_m, loose=True)
+        if near and self.progress.stuck(now, self.s.settle_s):
+            self._enter("harvest", now)
+            return
+        self._check_stuck(now, self.s.approach_timeout_s, leave=False)
+
+    def _harvest(self, now: int, st: ControlStatus, basket: int | None) -> None:
+        rec = self.target
+        assert rec is not None
+        exact = self._reached(st, self.s.harvest_tolerance_m)
+        held = self._reached(st, self.s.harvest_tolerance_m, self.s.catch_tolerance_m)
+        if exact or (held and self.progress.stuck(now, self.s.settle_s)):
+            rec.cuts += 1
+            rec.frozen = True  # the estimate of a falling fruit must not move the target
+            self.cut = CutState(
+                now, basket if basket is not None else 0, rec.planned.centre_world_m.copy()
+            )
+            self.tools.append(("cut", rec.fruit_id))
+            self.events.append(
+                Event("cut_sent", rec.fruit_id, reason=f"cut {rec.cuts}/{self.s.max_cut_attempts}")
+            )
+            self._enter("cut", now)
+            return
+        self._check_stuck(now, self.s.harvest_timeout_s, leave=True)
+
+    def _cut(self, now: int, st: ControlStatus, basket: int | None) -> None:
+        rec, cut = self.target, self.cut
+        assert rec is not None and cut is not None
+        if basket is not None and basket > cut.basket_before:
+            self.events.append(
+                Event(
+                    "fruit_collected", rec.fruit_id, outcome="harvested", reason="basket count up"
+                )
+            )
+            self._finish(rec, now, "harvested", "")
+            self._open_and_leave(now)
+            return
+        if now - cut.stamp_ns < self.s.collect_timeout_s * NS:
+            return
+        if self._still_attached(rec, cut):
+            self._cut_failed(now, "harvest")
+            return
+        # Not in the basket, and not seen on its branch since the cut: the tools may hide it
+        # (they are between the camera and the fruit). Back out to the ready pose and look.
+        self.verify = cut
+        self._open_and_leave(now)
+
+    def _cut_failed(self, now: int, retry_from: HarvestPhase) -> None:
+        """The fruit is still on its branch: cut again (from ``retry_from``) or give up."""
+        rec = self.target
+        assert rec is not None
+        if self.cut is not None:  # straight from the cut phase: the shears are still closed
+            self.tools.append(("open", rec.fruit_id))
+        self.cut = self.verify = None
+        if rec.cuts < self.s.max_cut_attempts:
+            why = f"cut {rec.cuts} failed (fruit still on its branch): retrying"
+            self.events.append(Event("replanned", rec.fruit_id, reason=why))
+            rec.frozen = False  # re-aim at the fruit as it is seen now
+            self._enter(retry_from, now)
+            return
+        why = f"cut failed {rec.cuts} times (fruit still on its branch)"
+        self.events.append(Event("fruit_skipped", rec.fruit_id, outcome="cut_failed", reason=why))
+        self._finish(rec, now, "cut_failed", why)
+        self._enter("leave", now)
+
+    def _leave(self, now: int, st: ControlStatus, basket: int | None) -> None:
+        if self.verify is not None:
+            self._verify(now, st)
+            return
+        reached = self._reached(st, self.s.leave_tolerance_m, loose=True)
+        if reached or now - self.progress.since_ns > self.s.leave_timeout_s * NS:
+            rec = self.target
+            if rec is not None:
+                self._end_attempt(rec, now)
+            self.target = None
+            self._select(now)
+
+    def _verify(self, now: int, st: ControlStatus) -> None:
+        """After an unconfirmed cut, at the ready pose: the fruit seen again where it was cut →
+        the cut failed; not seen ``verify_s`` after arriving → it fell outside the basket."""
+        rec, cut = self.target, self.verify
+        assert rec is not None and cut is not None
+        if self._still_attached(rec, cut):
+            self._cut_failed(now, "approach")
+            return
+        if not self.looking:  # first back out along the approach line (the fruit may be there)
+            if self._reached(st, self.s.leave_tolerance_m, loose=True) or (
+                now - self.progress.since_ns > self.s.leave_timeout_s * NS
+            ):
+                self.looking = True
+                self.progress = Progress(now, self.next_seq)
+            return
+        if self.arrived_ns is None and (
+            self._reached(st, self.s.home_tolerance_m, loose=True)
+            or now - self.progress.since_ns > self.s.home_timeout_s * NS
+        ):
+            self.arrived_ns = now
+        if self.arrived_ns is not None and now - self.arrived_ns >= self.s.verify_s * NS:
+            why = f"not in the basket {self.s.collect_timeout_s:.1f} s after the cut, not seen "
+            why += "on its branch since"
+            self.events.append(Event("fruit_dropped", rec.fruit_id, outcome="dropped", reason=why))
+            self._finish(rec, now, "dropped", why)
+            self._end_attempt(rec, now)
+            self.verify = None
+            self.target = None
+            self._select(now)
+
+    def _home(self, now: int, st: ControlStatus, basket: int | None) -> None:
+        if self._candidates():
+            self._select(now)
+            return
+        at_home = self._reached(st, self.s.home_tolerance_m, loose=True)
+        timed_out = now - self.progress.since_ns > self.s.home_timeout_s * NS
+        if (at_home or timed_out) and self.home_since_ns is None:
+            self.home_since_ns = now
+        if (
+            self.home_since_ns is not None
+            and now - self.home_since_ns >= self.s.finish_after_s * NS
+        ):
+            self._end_run(now, "no reachable fruit left")
+
+    # ---- selection ---------------------------------------------------------------------------
+    def _candidates(self) -> list[FruitRecord]:
+        return self.book.candidates(self.s.lost_after_frames)
+
+    def _select(self, now: int) -> None:
+        """The next fruit by the policy. Before committing: the IK must reach its poses
+        (else unreachable, final) and no neighbour may stand where the tools go (else it waits
+        for the others: a blocker harvested first clears the way; blocked with nothing else
+        left, or by a fruit that stays, it is unreachable)."""
+        while True:
+            cands = self._candidates()
+            if not cands:
+                self._go_home(now)
+                return
+            picked = (
+                self._planned_pick(cands, now)
+                if self.s.order == "planned"
+                else self._nearest_pick(cands, now)
+            )
+            if picked is not None:
+                break
+        rec, why = picked
+        self.target = rec
+        if rec.started_ns is None:
+            rec.started_ns = now
+        rec.attempt_ns = now
+        self.events.append(Event("fruit_selected", rec.fruit_id, reason=why))
+        self._enter("approach", now)
+
+    def _nearest_pick(self, cands: list[FruitRecord], now: int) -> tuple[FruitRecord, str] | None:
+        """The nearest candidate that can be harvested now; None: the candidates changed."""
+        for i in nearest_first([r.seen.distance_m for r in cands]):
+            rec = cands[i]
+            if not self._check_reach(rec, now):
+                return None
+            blocking = self._blockers(rec)
+            if not blocking:
+                return rec, f"nearest ({rec.seen.distance_m:.3f} m from the camera)"
+            others = [r for r in cands if r is not rec and not r.deferred]
+            self._blocked(rec, blocking, now, wait=bool(others))
+            if rec.finished or not others:
+                return None
+        return None
+
+    def _planned_pick(self, cands: list[FruitRecord], now: int) -> tuple[FruitRecord, str] | None:
+        """The first fruit of the shortest order that harvests every blocker before the fruit
+        it blocks; None: the candidates changed."""
+        for r in cands:
+            self._check_reach(r, now)
+        ok = [r for r in cands if not r.finished]
+        if len(ok) != len(cands):
+            return None
+        index = {r.key: i for i, r in enumerate(ok)}
+        before: list[tuple[int, int]] = []
+        for j, r in enumerate(ok):
+            blocking = self._blockers(r)
+            staying = [b for b in blocking if b.key not in index]
+            if staying:
+                self._blocked(r, staying, now, wait=False)
+                return None
+            before += [(index[b.key], j) for b in blocking]
+        pts = np.array([pre_pose(r.planned, self.pose_settings).tip_world_m for r in ok])
+        start = self.last_tip_world_m if self.last_tip_world_m is not None else self._ready_tip()
+        order = planned_order(start, pts, self._ready_tip(), self.s.planned_exact_max, before)
+        rec = ok[order[0]]
+        if self._blockers(rec):  # the precedences could not all hold (blockers in a cycle)
+            self._blocked(rec, self._blockers(rec), now, wait=False)
+            return None
+        return rec, f"planned order ({len(ok)} fruit): " + " → ".join(
+            str(ok[i].fruit_id) for i in order
+        )
+
+    def _blockers(self, rec: FruitRecord) -> list[FruitRecord]:
+        """Fruit on the tree (seen, not known to be off it) where the tools go for ``rec``."""
+        present = [
+            r
+            for r in self.book.detected()
+            if r is not rec and r.in_scene and r.outcome not in ("harvested", "dropped")
+        ]
+        hit = blockers(
+            rec.planned,
+            [r.planned for r in present],
+            self.pose_settings,
+            self.s.neighbour_clearance_m,
+        )
+        return [present[i] for i in hit]
+
+    def _blocked(self, rec: FruitRecord, blocking: list[FruitRecord], now: int, wait: bool) -> None:
+        """``rec`` cannot be harvested now: wait for the others (once), or give it up."""
+        names = ", ".join(f"#{b.fruit_id}" for b in blocking)
+        if wait and not rec.deferred:
+            rec.deferred = True
+            why = f"blocked by {names} (in the tools' way): retried after the others"
+            self.events.append(Event("fruit_skipped", rec.fruit_id, reason=why))
+            return
+        if wait:
+            return
+        why = f"unreachable: blocked by {names} (in the tools' way)"
+        self.events.append(Event("fruit_skipped", rec.fruit_id, outcome="unreachable", reason=why))
+        self._finish(rec, now, "unreachable", why)
+        rec.finished_ns = now
+
+    def _check_reach(self, rec: FruitRecord, now: int) -> bool:
+        """IK of the harvest pose and the pre-pose (cached); unreachable: skipped now."""
+        if rec.reach is None:
+            h = harvest_pose(rec.planned, self.pose_settings)
+            p = pre_pose(rec.planned, self.pose_settings)
+            rec.reach = (
+                self.kin.reach(h.tip_world_m, h.basket_below_m),
+                self.kin.reach(p.tip_world_m, p.basket_below_m),
+            )
+        hv, pv = rec.reach
+        if hv.reachable and pv.reachable:
+            return True
+        which = "harvest pose" if not hv.reachable else "pre-pose"
+        bad = hv if not hv.reachable else pv
+        why = f"unreachable: {which} out of reach ({bad.why()})"
+        self.events.append(Event("fruit_skipped", rec.fruit_id, outcome="unreachable", reason=why))
+        self._finish(rec, now, "unreachable", why)
+        rec.finished_ns = now  # never attempted
+        return False
+
+    # ---- helpers -----------------------------------------------------------------------------
+    def _enter(self, phase: HarvestPhase, now: int) -> None:
+        rec = self.target
+        self.events.append(
+            Event(
+                "phase_changed",
+                rec.fruit_id if rec is not None else None,
+                self.phase,
+                phase,
+            )
+        )
+        self.phase = phase
+        self.progress = Progress(now, self.next_seq)
+        self.arrived_ns = None
+        self.looking = False
+        goal = self.goal()
+        if goal.poses is not None:
+            self.last_tip_world_m = goal.poses.tip_world_m
+
+    def _go_home(self, now: int) -> None:
+        if self.phase != "home":
+            self.home_since_ns = None
+            self.target = None
+            self._enter("home", now)
+
+    def _open_and_leave(self, now: int) -> None:
+        rec = self.target
+        self.tools.append(("open", rec.fruit_id if rec is not None else None))
+        self.cut = None
+        self._enter("leave", now)
+
+    def _finish(self, rec: FruitRecord, now: int, outcome: FruitOutcome, reason: str) -> None:
+        """Record the outcome; the attempt ends with ``_end_attempt`` (at once, or once the
+        tools are back at the pre-pose)."""
+        rec.outcome, rec.reason = outcome, reason
+
+    def _end_attempt(self, rec: FruitRecord, now: int) -> None:
+        """The tools are done with this fruit for now: its time adds up; a settled fruit's
+        cycle ends here."""
+        if rec.attempt_ns is not None:
+            rec.spent_ns += now - rec.attempt_ns
+            rec.attempt_ns = None
+        if rec.finished and rec.finished_ns is None:
+            rec.finished_ns = now
+
+    def _end_run(self, now: int, why: str) -> None:
+        rec = self.target
+        if rec is not None and not rec.finished:
+            rec.outcome, rec.reason = "pending", why
+        if rec is not None:
+            self._end_attempt(rec, now)
+        for r in self.book.detected():
+            if not r.finished and r.losses > 0 and not r.in_scene:
+                r.outcome, r.reason = "lost", "left the scene and never came back"
+            if r.finished_ns is None and r.finished:
+                r.finished_ns = now
+        self.target = None
+        self.events.append(Event("phase_changed", None, self.phase, "done", why))
+        self.events.append(Event("run_finished", reason=why))
+        self.phase = "done"
+        self.finished = True
+
+    def _check_stuck(self, now: int, timeout_s: float, leave: bool) -> None:
+        rec = self.target
+        assert rec is not None
+        over = now - self.progress.since_ns > timeout_s * NS
+        stuck = self.progress.stuck(now, self.s.no_progress_s)
+        if not (over or stuck):
+            return
+        err = self.progress.best_m
+        what = f"timed out after {timeout_s:.1f} s" if over else "no progress"
+        detail = f"{self.phase} {what} (best task error {err * 1e3:.0f} mm)"
+        if self.s.defer_blocked and not rec.deferred:
+            # A neighbour or the trunk may hold the tools back; harvesting the others first
+            # may clear the way: try once more when nothing else is left.
+            rec.deferred = True
+            why = f"blocked: {detail}; retried after the others"
+            self.events.append(Event("fruit_skipped", rec.fruit_id, reason=why))
+        else:
+            why = f"unreachable: {detail}"
+            self.events.append(
+                Event("fruit_skipped", rec.fruit_id, outcome="unreachable", reason=why)
+            )
+            self._finish(rec, now, "unreachable", why)
+        if leave:
+            rec.frozen = True
+            self._enter("leave", now)
+        else:
+            self._end_attempt(rec, now)
+            self.target = None
+            self._select(now)
+
+    def _reached(
+        self, st: ControlStatus, tol_m: float, rel_tol_m: float | None = None, loose: bool = False
+    ) -> bool:
+        """The status is of this phase's targets, not holding, and within tolerance (the
+        cutter's ``tol_m``; the dish's ``rel_tol_m``, default relative_tolerance_m; orientations;
+        ``loose``: the cutter's position only)."""
+        if st.target_seq is None or st.target_seq < self.progress.first_target_seq or st.reason:
+            return False
+        if st.abs_position_error_m > tol_m:
+            return False
+        if loose:
+            return True
+        rel_tol = self.s.relative_tolerance_m if rel_tol_m is None else rel_tol_m
+        return (
+            st.rel_position_error_m <= rel_tol
+            and st.abs_orientation_error_rad <= self.s.orientation_tolerance_rad
+            and st.rel_orientation_error_rad <= self.s.orientation_tolerance_rad
+        )
+
+    def _still_attached(self, rec: FruitRecord, cut: CutState) -> bool:
+        """Seen after the cut (once a cut fruit would have fallen) where it was cut."""
+        f = rec.seen
+        if not rec.in_scene or f.last_seen_stamp_ns < cut.stamp_ns + self.s.seen_after_cut_s * NS:
+            return False
+        p = np.array(f.position_world_m, float)
+        return bool(np.linalg.norm(p - cut.centre_world_m) <= self.s.attached_tolerance_m)
+
+    def _note_switches_and_moves(self) -> None:
+        rec = self.target
+        for key, old, new in self.book.switches:
+            if rec is not None and key == rec.key:
+                self.events.append(
+                    Event("replanned", new, reason=f"track ID switch {old} → {new}: same fruit")
+                )
+        for key, d in self.book.moved:
+            if rec is not None and key == rec.key and self.phase in ("approach", "harvest"):
+                self.events.append(
+                    Event("replanned", rec.fruit_id, reason=f"fruit moved {d * 100:.1f} cm")
+                )
+        self.book.switches.clear()
+        self.book.moved.clear()
+
+    def _ready_tip(self) -> np.ndarray:
+        return self.kin.ready_tip_world_m
+
+    def _ready(self) -> ToolPoses:
+        k = self.kin
+        return ToolPoses(k.ready_tip_world_m, k.ready_basket_below_m, k.ready_R_world_cutter)

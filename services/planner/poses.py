@@ -1,0 +1,120 @@
+"""The paper's poses (§IV-A, §IV-B) for one fruit, in the world frame: the harvest pose (cutter
+tip at the peduncle, dish under the fruit), the pre-pose d_z in front of it along the camera's
+optical axis, and the ready pose; and the PlanTarget that carries them.
+
+World-frame targets: the camera is rigid on the torso, so the paper's camera-frame poses are the
+same poses expressed in the world. Two deliberate readings of the paper:
+
+* the cutter tip goes d_v + d_s above the fruit centre along the **world vertical**, not along
+  the camera's −y (pitched 8° down, 0.8 cm off at 6 cm): a peduncle hangs vertically;
+* the dish is not at the paper's fixed x_r but d_s + 2 d_v + rim + clearance under the tip, so
+  its rim passes under the fruit on the way in (a fixed offset would sweep the rim through the
+  bottom of a large fruit).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from schemas.base import Header
+from schemas.control import AbsoluteTarget, HarvestPhase, PlanTarget, RelativeTarget
+from services.controller.geometry import matrix_to_quat_xyzw
+from services.robot.model import TOOLS
+from services.robot.reach import R_CUTTER_BASKET, R_WORLD_CUTTER_FORWARD
+
+Q_CUTTER_FORWARD = matrix_to_quat_xyzw(R_WORLD_CUTTER_FORWARD)
+Q_BASKET_IN_CUTTER = matrix_to_quat_xyzw(R_CUTTER_BASKET)
+
+
+@dataclass(frozen=True)
+class FruitShape:
+    """What the poses need of a fruit: centre (world, m) and semi-axes d_h, d_v (m)."""
+
+    centre_world_m: np.ndarray
+    d_h_m: float
+    d_v_m: float
+
+
+@dataclass(frozen=True)
+class ToolPoses:
+    """Cutter tip position (world, m), the dish's distance under it (cutter +x, m), and the
+    cutter orientation (None: level, pointing forward, the harvest orientation)."""
+
+    tip_world_m: np.ndarray
+    basket_below_m: float
+    R_world_cutter: np.ndarray | None = None
+    basket_back_m: float = 0.0  # dish centre back along the cutter's pointing axis (−z), m
+
+
+@dataclass(frozen=True)
+class PoseSettings:
+    """d_s, d_z, the dish clearance, and the camera's optical axis in the world."""
+
+    security_m: float
+    approach_m: float
+    basket_clearance_m: float
+    approach_basket_drop_m: float
+    camera_axis_world: np.ndarray  # unit vector: the camera's +z (optical axis) in the world
+    dish_back_m: float = 0.0
+
+
+def basket_below_m(f: FruitShape, p: PoseSettings) -> float:
+    """Dish centre under the cutter tip: tip → fruit top (d_s), the fruit (2 d_v), rim, gap."""
+    return p.security_m + 2.0 * f.d_v_m + TOOLS.basket_rim_height_m + p.basket_clearance_m
+
+
+def harvest_pose(f: FruitShape, p: PoseSettings) -> ToolPoses:
+    """x_a: the tip d_v + d_s above the fruit centre (on the peduncle); the dish under it,
+    ``dish_back_m`` towards the robot (it still catches the fruit, and keeps clear of fruit
+    hanging behind)."""
+    tip = f.centre_world_m + np.array([0.0, 0.0, f.d_v_m + p.security_m])
+    return ToolPoses(tip, basket_below_m(f, p), basket_back_m=p.dish_back_m)
+
+
+def pre_pose(f: FruitShape, p: PoseSettings) -> ToolPoses:
+    """The approach/leave pose: the harvest pose moved d_z back along the optical axis, the
+    dish a little lower (its rim clears the fruit's underside by more than the damper's d_s)."""
+    h = harvest_pose(f, p)
+    return ToolPoses(
+        h.tip_world_m - p.approach_m * p.camera_axis_world,
+        h.basket_below_m + p.approach_basket_drop_m,
+        basket_back_m=h.basket_back_m,
+    )
+
+
+def plan_target(
+    header: Header,
+    phase: HarvestPhase,
+    poses: ToolPoses | None,
+    fruit_id: int | None = None,
+    ignore: tuple[int, ...] = (),
+) -> PlanTarget:
+    """The message: cutter level and pointing forward, its turn about the vertical free (θ_a);
+    the dish under the tip, opening up, its turn about its normal free. None: hold still."""
+    if poses is None:
+        return PlanTarget(header=header, phase=phase, fruit_id=fruit_id)
+    t = poses.tip_world_m
+    q = (
+        Q_CUTTER_FORWARD
+        if poses.R_world_cutter is None
+        else matrix_to_quat_xyzw(poses.R_world_cutter)
+    )
+    return PlanTarget(
+        header=header,
+        phase=phase,
+        fruit_id=fruit_id,
+        absolute=AbsoluteTarget(
+            frame_id="world",
+            position_m=(float(t[0]), float(t[1]), float(t[2])),
+            orientation_xyzw=q,
+            free_axis="x",
+        ),
+        relative=RelativeTarget(
+            position_m=(float(poses.basket_below_m), 0.0, -float(poses.basket_back_m)),
+            orientation_xyzw=Q_BASKET_IN_CUTTER,
+            free_axis="z",
+        ),
+        ignore_fruit_ids=ignore,
+    )

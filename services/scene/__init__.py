@@ -1,0 +1,210 @@
+"""Scene estimation: 3D fruit from tracks and depth, the persistent fruit list, the trunk and the
+obstacle set (paper §III-A to §III-C, §IV-B); answers every perception/tracks with scene/state."""
+
+from typing import Literal
+
+from pydantic import Field
+from pydantic_settings import SettingsConfigDict
+
+from services.runtime import NodeSpec, ServiceDef, ServiceSettings
+
+HsvTriple = tuple[int, int, int]
+
+
+class Settings(ServiceSettings):
+    """Settings of the scene estimator."""
+
+    model_config = SettingsConfigDict(env_prefix="HARVEST_SCENE_")
+
+    # ---- inputs ------------------------------------------------------------------------------
+    frame_buffer: int = Field(
+        default=8, ge=1, le=256, description="Camera frames kept to join tracks to their frame."
+    )
+    accept_tentative: bool = Field(
+        default=False,
+        description="Let tracks not yet confirmed by the tracker enter the fruit list (false: "
+        "only confirmed tracks, as Deep SORT reports them).",
+    )
+    # ---- fruit in 3D (paper §III-A) ----------------------------------------------------------
+    fruit_method: Literal["surface", "paper"] = Field(
+        default="surface",
+        description="'surface': box tangent planes + every depth pixel of the visible surface; "
+        "'paper': eq. (2)-(4) with the median depth of a small window at the box centre.",
+    )
+    paper_window_px: int = Field(
+        default=5, ge=1, le=51, description="'paper': side of the centre depth window, px."
+    )
+    central_fraction: float = Field(
+        default=0.7,
+        gt=0.1,
+        le=1.0,
+        description="Depth pixels used: inside this share of the fruit ellipse's semi-axes.",
+    )
+    min_depth_pixels: int = Field(
+        default=8, ge=1, description="Fewest valid depth pixels for an estimate."
+    )
+    min_support_share: float = Field(
+        default=0.05,
+        gt=0,
+        le=1,
+        description="Share of a box's depth pixels that the fruit's surface must hold (the "
+        "farthest such surface is the fruit: occluders are nearer).",
+    )
+    occluder_margin_m: float = Field(
+        default=0.01,
+        ge=0,
+        le=0.2,
+        description="A box side is cut by an occluder when what lies beyond it is nearer than "
+        "the fruit's silhouette by more than this (plus a quarter of the fruit's size), m.",
+    )
+    edge_strip_px: int = Field(
+        default=3, ge=1, le=20, description="Width of the strip tested beyond a box side, px."
+    )
+    border_margin_px: float = Field(
+        default=1.0, ge=0, le=20, description="A box side this near the image border is cut, px."
+    )
+    min_semi_axis_m: float = Field(
+        default=0.025,
+        gt=0,
+        description="Smallest plausible fruit semi-axis d_h, m (oranges: 3-5 cm radius). A "
+        "smaller estimate is a partial view (a fruit mostly hidden, a box on a part of it): "
+        "refused, the fruit keeps its state.",
+    )
+    max_semi_axis_m: float = Field(
+        default=0.12, gt=0, description="Largest plausible fruit semi-axis d_h, m."
+    )
+    v_over_h_prior: float = Field(
+        default=1.0,
+        ge=0.5,
+        le=2.0,
+        description="d_v/d_h assumed for a fruit with a cut box side until it was seen whole "
+        "(then its own measured ratio is used).",
+    )
+    fruit_hsv_low: HsvTriple = Field(
+        default=(0, 140, 50), description="Fruit colour, OpenCV HSV lower bound (inclusive)."
+    )
+    fruit_hsv_high: HsvTriple = Field(
+        default=(30, 255, 255), description="Fruit colour, OpenCV HSV upper bound (inclusive)."
+    )
+    refine_box: bool = Field(
+        default=True,
+        description="Shrink each track's box to the fruit-coloured pixels at the fruit's depth "
+        "inside it before measuring (a detector's boxes are a few pixels loose).",
+    )
+    min_colour_share: float = Field(
+        default=0.15,
+        ge=0,
+        le=1,
+        description="Fewest fruit-coloured pixels, as a share of the box's valid depth pixels, "
+        "for an estimate: a detection on a hand, a branch or a leaf is not a fruit.",
+    )
+    # ---- the robot self-filter ---------------------------------------------------------------
+    robot_self_filter: bool = Field(
+        default=True,
+        description="Drop a fruit estimate that lies inside the robot's own arms or tools (the "
+        "LWR's orange links look like oranges): capsules at the joint state of the frame's "
+        "stamp. Once a joint state has been received, a Tracks message waits for the joint "
+        "state of its frame.",
+    )
+    self_filter_share: float = Field(
+        default=0.5,
+        ge=0,
+        le=2,
+        description="An estimate whose centre is closer to a link's axis than the link radius "
+        "plus this share of its d_h is the robot itself (a real fruit touching the link is a "
+        "whole d_h out).",
+    )
+    prefer_whole_views: bool = Field(
+        default=True,
+        description="A fruit whose stored state comes from a whole view (no side cut) keeps it "
+        "against views with a side cut by an occluder or the border.",
+    )
+    # ---- the persistent list (paper §III-B) --------------------------------------------------
+    update_threshold_m: float = Field(
+        default=0.04,
+        gt=0,
+        description="A new position farther than this from the stored one is not taken (the "
+        "paper's guard against temporary ID errors), m.",
+    )
+    forget_after_frames: int = Field(
+        default=100, ge=1, description="Fruit IDs unseen for this many frames are forgotten."
+    )
+    accept_jump_frames: int = Field(
+        default=15,
+        ge=0,
+        description="A position jump confirmed by this many consecutive frames is taken (the "
+        "fruit really moved); 0 never takes one (the paper's rule).",
+    )
+    # ---- the trunk (paper §III-C) ------------------------------------------------------------
+    trunk_method: Literal["circle", "paper"] = Field(
+        default="circle",
+        description="'circle': camera-facing circle fit of the mask's 3D points; 'paper': the "
+        "mean pixel and mean depth of the mask (a point on the trunk's front surface).",
+    )
+    trunk_max_depth_m: float = Field(
+        default=2.0, gt=0, le=20, description="Depth mask: farthest trunk pixel kept, m."
+    )
+    trunk_hsv_low: HsvTriple = Field(
+        default=(10, 70, 80), description="Trunk colour, OpenCV HSV lower bound (the paper's)."
+    )
+    trunk_hsv_high: HsvTriple = Field(
+        default=(20, 130, 140), description="Trunk colour, OpenCV HSV upper bound (the paper's)."
+    )
+    trunk_min_pixels: int = Field(default=50, ge=1, description="Fewest mask pixels for a fix.")
+    trunk_min_radius_m: float = Field(
+        default=0.03,
+        gt=0,
+        description="Smallest trunk radius, m (6 cm across: thinner is a branch, which also "
+        "passes the colour mask).",
+    )
+    trunk_max_radius_m: float = Field(default=0.2, gt=0, description="Largest trunk radius, m.")
+    trunk_min_height_m: float = Field(
+        default=0.4,
+        gt=0,
+        description="Height of trunk a fix must see, m: a trunk runs from the ground into the "
+        "crown, a near-vertical branch piece is shorter.",
+    )
+    trunk_smoothing: float = Field(
+        default=0.2, gt=0, le=1, description="Gain of the exponential average over frames."
+    )
+    trunk_gate_m: float = Field(
+        default=0.1, gt=0, description="Fixes farther than this from the estimate are outliers, m."
+    )
+    trunk_reacquire_frames: int = Field(
+        default=5, ge=1, description="Consecutive agreeing outliers that replace the estimate."
+    )
+    trunk_forget_after_frames: int = Field(
+        default=100, ge=1, description="Frames without a fix after which the trunk is not found."
+    )
+    trunk_tool_margin_m: float = Field(
+        default=0.08,
+        ge=0,
+        le=1,
+        description="The trunk obstacle's surface passes this far behind the selected fruit's "
+        "back (the paper: 0): the collecting dish, centred under the fruit, reaches 4.5 cm past "
+        "it and the damper keeps d_s more, m.",
+    )
+    trunk_default_radius_m: float = Field(
+        default=0.08,
+        gt=0,
+        description="Trunk radius when none is measured ('paper' method): the obstacle's "
+        "smallest radius, m.",
+    )
+
+
+SPEC = NodeSpec(
+    inputs=("camera/rgbd", "robot/joint_state", "perception/tracks", "harvest/events"),
+    outputs=("scene/state",),
+    answers={"perception/tracks": ("scene/state",)},
+)
+
+
+def _make_core(settings: Settings):
+    from services.scene.core import SceneCore
+
+    return SceneCore(settings)
+
+
+SERVICE = ServiceDef(
+    "scene", Settings, SPEC, kind="reactive", make_core=_make_core, description=__doc__ or ""
+)

@@ -1,0 +1,392 @@
+"""Pure core of the scene estimator: joins each Tracks message to its RGB-D frame, measures the
+fruit and the trunk, keeps the persistent list, and answers with exactly one SceneState.
+
+Frames (camera/rgbd) wait in a small buffer keyed by seq; a Tracks message names its frame by
+``frame_seq`` and the stamps must match. Order across keys is not guaranteed (with
+zenoh-python's default of one delivery thread per subscriber, a small Tracks message was seen
+to overtake the 1.5 MB frame it was made from in a resim). A Tracks message newer than every
+frame received so far therefore waits for its frame and is answered when it comes, so the
+answer does not depend on that race. A Tracks message whose
+frame will not come (a newer frame arrived, or it is older than the newest frame and not in
+the buffer) is answered at once: the last state, unchanged, ``input_problem`` saying why
+(counted). At most ``frame_buffer`` Tracks messages wait; past that the oldest is answered so.
+
+The robot self-filter (``robot_self_filter``) needs the joint state of the frame's stamp (the
+sim publishes it in the same tick as the frame, on another key): once a joint state has been
+received, a Tracks message also waits until a joint state at or after its stamp is in, for the
+same reason. Estimates inside the arms' capsules are dropped and counted (``fruit_on_robot``).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import Counter, OrderedDict, deque
+from typing import Any
+
+import numpy as np
+
+from schemas.camera import RgbdFrame
+from schemas.harvest import HarvestEvent
+from schemas.perception import Tracks
+from schemas.robot import JointState
+from schemas.scene import Fruit, FruitFlag, SceneState, Trunk
+from services.robot.clearance import Capsule, RobotBody, axis_distances_m
+from services.runtime import ConfigError, Output, Stamper
+from services.scene import Settings
+from services.scene.fruit3d import EstimateFailure, FruitEstimate, FruitParams, estimate_fruit
+from services.scene.fruit_list import Entry, FruitList, ListParams, Measurement
+from services.scene.geometry import Pinhole, PoseError, RigidTransform, vec3
+from services.scene.obstacles import build_obstacles
+from services.scene.trunk import TrunkFailure, TrunkParams, measure_trunk
+from services.scene.trunk_track import TrackParams, TrunkTrack
+
+log = logging.getLogger("scene")
+TOPIC_OUT = "scene/state"
+RATIO_HISTORY = 15  # whole-box views whose median d_v/d_h a fruit keeps
+HARVESTED_EVENTS = ("fruit_collected", "fruit_dropped")
+TARGET_ENDS = (*HARVESTED_EVENTS, "fruit_skipped", "fruit_lost")
+JOINT_BUFFER = 256  # joint states kept (120 Hz: ~2 s, the frame buffer's span at 15 Hz and more)
+
+
+class SceneCore:
+    def __init__(self, s: Settings) -> None:
+        from services.vision.trunk_mask import HsvBox
+
+        try:
+            self.trunk_hsv = HsvBox(s.trunk_hsv_low, s.trunk_hsv_high)
+            HsvBox(s.fruit_hsv_low, s.fruit_hsv_high)
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
+        if s.min_semi_axis_m >= s.max_semi_axis_m:
+            raise ConfigError("min_semi_axis_m must be below max_semi_axis_m")
+        if s.trunk_min_radius_m >= s.trunk_max_radius_m:
+            raise ConfigError("trunk_min_radius_m must be below trunk_max_radius_m")
+        self.s = s
+        self.fruit_params = FruitParams(
+            method=s.fruit_method,
+            central_fraction=s.central_fraction,
+            paper_window_px=s.paper_window_px,
+            min_pixels=s.min_depth_pixels,
+            min_support_share=s.min_support_share,
+            border_margin_px=s.border_margin_px,
+            edge_strip_px=s.edge_strip_px,
+            occluder_margin_m=s.occluder_margin_m,
+            min_semi_axis_m=s.min_semi_axis_m,
+            max_semi_axis_m=s.max_semi_axis_m,
+            fruit_hsv_low=s.fruit_hsv_low,
+            fruit_hsv_high=s.fruit_hsv_high,
+            min_colour_share=s.min_colour_share,
+            refine_box=s.refine_box,
+        )
+        self.trunk_params = TrunkParams(
+            method=s.trunk_method,
+            min_pixels=s.trunk_min_pixels,
+            min_radius_m=s.trunk_min_radius_m,
+            max_radius_m=s.trunk_max_radius_m,
+            min_height_m=s.trunk_min_height_m,
+        )
+        self.fruits = FruitList(
+            ListParams(s.update_threshold_m, s.forget_after_frames, s.accept_jump_frames)
+        )
+        self.trunk = TrunkTrack(
+            TrackParams(
+                s.trunk_smoothing,
+                s.trunk_gate_m,
+                s.trunk_reacquire_frames,
+                s.trunk_forget_after_frames,
+            )
+        )
+        self.target: int | None = None  # the planner's current fruit (harvest/events)
+        self.body = RobotBody() if s.robot_self_filter else None
+        self.joints: OrderedDict[int, JointState] = OrderedDict()  # stamp → joint state
+        self.newest_joint_ns: int | None = None
+        self.frames: OrderedDict[int, RgbdFrame] = OrderedDict()
+        self.newest_frame_ns: int | None = None
+        self.waiting: list[Tracks] = []  # Tracks newer than every frame received so far
+        self.ratios: dict[int, deque[float]] = {}
+        self.T: RigidTransform | None = None  # the last frame's pose
+        self.trunk_pixels = 0
+        self.counters: Counter[str] = Counter()
+        self.stamper = Stamper("scene")
+
+    # ---- inputs --------------------------------------------------------------------------------
+    def handle(self, topic: str, msg: Any) -> list[Output]:
+        if topic == "camera/rgbd":
+            self._keep_frame(msg)
+        elif topic == "robot/joint_state":
+            if self.body is None:
+                return []
+            self._keep_joints(msg)
+        elif topic == "harvest/events":
+            self._take_event(msg)
+            return []
+        elif topic == "perception/tracks":
+            self.waiting.append(msg)
+            if not self._ready(msg):
+                self.counters["tracks_before_frame"] += 1
+        else:
+            return []
+        return self._release()
+
+    def _ready(self, t: Tracks) -> bool:
+        """Its frame (and the joint state of its stamp) is in, or a newer one says it will not
+        come."""
+        stamp = t.header.stamp_ns
+        if self.newest_frame_ns is None or stamp > self.newest_frame_ns:
+            return False
+        return self.newest_joint_ns is None or stamp <= self.newest_joint_ns
+
+    def _release(self) -> list[Output]:
+        """Answer the waiting Tracks messages that are due, in arrival order; past
+        ``frame_buffer`` waiting, the oldest is answered anyway (with what there is)."""
+        out: list[Output] = []
+        while self.waiting and (
+            self._ready(self.waiting[0]) or len(self.waiting) > self.s.frame_buffer
+        ):
+            out.append((TOPIC_OUT, self._answer(self.waiting.pop(0))))
+        return out
+
+    def _keep_joints(self, js: JointState) -> None:
+        stamp = js.header.stamp_ns
+        self.joints[stamp] = js
+        self.joints.move_to_end(stamp)
+        self.newest_joint_ns = (
+            stamp if self.newest_joint_ns is None else max(self.newest_joint_ns, stamp)
+        )
+        while len(self.joints) > JOINT_BUFFER:
+            self.joints.popitem(last=False)
+
+    def _keep_frame(self, frame: RgbdFrame) -> None:
+        self.frames[frame.header.seq] = frame
+        self.frames.move_to_end(frame.header.seq)
+        self.newest_frame_ns = frame.header.stamp_ns
+        while len(self.frames) > self.s.frame_buffer:
+            self.frames.popitem(last=False)
+
+    def _take_event(self, ev: HarvestEvent) -> None:
+        if ev.event == "run_finished":
+            self.target = None
+        if ev.fruit_id is None:
+            return
+        # The obstacle radius is the paper's for the fruit being harvested: follow the planner's
+        # target (its order may differ from nearest-first), across its ID switches.
+        if ev.event == "fruit_selected" or (ev.event == "replanned" and self.target is not None):
+            self.target = ev.fruit_id
+        elif ev.fruit_id == self.target and ev.event in (
+            *HARVESTED_EVENTS,
+            "fruit_skipped",
+            "fruit_lost",
+        ):
+            self.target = None
+        if ev.event in HARVESTED_EVENTS:
+            self.fruits.mark(ev.fruit_id, "harvested")
+            self.counters["mark_harvested"] += 1
+        elif ev.event == "fruit_skipped" and ev.outcome == "unreachable":
+            self.fruits.mark(ev.fruit_id, "unreachable")
+            self.counters["mark_unreachable"] += 1
+
+    # ---- one Tracks message ------------------------------------------------------------------
+    def _answer(self, tracks: Tracks) -> SceneState:
+        frame = self.frames.get(tracks.frame_seq)
+        problem = ""
+        if frame is None or frame.header.stamp_ns != tracks.header.stamp_ns:
+            self.counters["frame_not_received"] += 1
+            held = ", ".join(str(k) for k in self.frames) or "none"
+            problem = (
+                f"frame seq {tracks.frame_seq} at {tracks.header.stamp_ns} ns was not received "
+                f"(frames held: {held}); the last state is kept"
+            )
+        else:
+            try:
+                T = RigidTransform.of(frame.meta.T_world_camera)
+            except PoseError as exc:
+                self.counters["frame_pose_invalid"] += 1
+                problem = f"frame seq {tracks.frame_seq}: {exc}; the last state is kept"
+            else:
+                self.T = T
+                self._measure(tracks, frame, T)
+        if problem:
+            log.warning("%s", problem)
+        return self._state(tracks, problem)
+
+    def _measure(self, tracks: Tracks, frame: RgbdFrame, T: RigidTransform) -> None:
+        import cv2
+
+        K = Pinhole.of(frame.meta.intrinsics)
+        depth_m = frame.depth_m()
+        hsv = cv2.cvtColor(np.ascontiguousarray(frame.rgb), cv2.COLOR_RGB2HSV)
+        measured: dict[int, Measurement] = {}
+        failed: dict[int, FruitFlag] = {}
+        robot = self._robot_at(frame.header.stamp_ns)
+        for tr in tracks.tracks:
+            if not (tr.confirmed or self.s.accept_tentative):
+                self.counters["track_tentative"] += 1
+                continue
+            if not tr.matched:  # a coasting track's box is a prediction, not a detection
+                self.counters["track_coasting"] += 1
+                continue
+            est = estimate_fruit(
+                tr.xyxy_px, depth_m, hsv, K, self.fruit_params, self._v_over_h(tr.track_id)
+            )
+            if isinstance(est, EstimateFailure):
+                self.counters[f"fruit_{est.reason}"] += 1
+                failed[tr.track_id] = _failure_flag(est)
+                continue
+            if self._keep_whole_view(tr.track_id, est):
+                # A side cut (an arm or a hand passing, leaves) while a whole view of this fruit
+                # is stored: the whole view is the better estimate (a cut view guesses the
+                # missing semi-axis; during a harvest the arms cut every neighbour's box).
+                self.counters["fruit_cut_view_keep_state"] += 1
+                failed[tr.track_id] = "border_cut" if any(est.sides.border) else "edge_occluded"
+                continue
+            if not est.sides.whole_pair and tr.track_id in self.fruits.entries:
+                # Cut on two adjacent sides (a corner): the box no longer fixes the shape; a
+                # fruit already measured keeps its state rather than take a guess.
+                self.counters["fruit_box_cut_keep_state"] += 1
+                failed[tr.track_id] = "border_cut" if any(est.sides.border) else "edge_occluded"
+                continue
+            m = self._measurement(tr.track_id, est, T)
+            if robot and self._on_robot(m, robot):
+                self.counters["fruit_on_robot"] += 1
+                continue
+            measured[tr.track_id] = m
+        for note in self.fruits.step(tracks.header.stamp_ns, measured, failed):
+            log.debug("%s", note)
+        for fid in [k for k in self.ratios if k not in self.fruits.entries]:
+            del self.ratios[fid]
+        self._measure_trunk(frame, depth_m, K, T)
+
+    def _measurement(self, fid: int, est: FruitEstimate, T: RigidTransform) -> Measurement:
+        flags: list[FruitFlag] = []
+        if any(est.sides.border):
+            flags.append("border_cut")
+            self.counters["fruit_border_cut"] += 1
+        if not all(g or b for g, b in zip(est.sides.good, est.sides.border, strict=True)):
+            flags.append("edge_occluded")
+        if est.sides.all_good:
+            self.ratios.setdefault(fid, deque(maxlen=RATIO_HISTORY)).append(est.v_over_h)
+        return Measurement(
+            est.position_cam_m,
+            T.to_world(est.position_cam_m),
+            est.semi_axis_h_m,
+            est.semi_axis_v_m,
+            tuple(flags),
+        )
+
+    def _robot_at(self, stamp_ns: int) -> tuple[Capsule, ...]:
+        """The arms' and tools' capsules at the frame's stamp (the dish's sphere left out: a
+        fruit in the dish is the planner's to judge); () without a joint state for it."""
+        if self.body is None or self.newest_joint_ns is None:
+            return ()
+        js = self.joints.get(stamp_ns)
+        if js is None:
+            self.counters["joint_state_missing"] += 1
+            return ()
+        q = {role: arm.position_rad for role, arm in js.arms.items()}
+        try:
+            return self.body.capsules(q)[:-1]
+        except (KeyError, ValueError) as exc:
+            self.counters["joint_state_invalid"] += 1
+            log.warning("joint state at %d ns: %s; no self-filter for this frame", stamp_ns, exc)
+            return ()
+
+    def _on_robot(self, m: Measurement, robot: tuple[Capsule, ...]) -> bool:
+        radii = np.array([r for _a, _b, r in robot])
+        reach = radii + self.s.self_filter_share * m.semi_axis_h_m
+        return bool((axis_distances_m(m.position_world_m, robot) < reach).any())
+
+    def _keep_whole_view(self, fid: int, est: FruitEstimate) -> bool:
+        """A cut view of a fruit whose whole view is stored (it has whole-view ratios and the
+        stored state came from one)."""
+        e = self.fruits.entries.get(fid)
+        return (
+            self.s.prefer_whole_views
+            and not est.sides.all_good
+            and e is not None
+            and fid in self.ratios
+            and not e.state.flags
+        )
+
+    def _v_over_h(self, fid: int) -> float:
+        r = self.ratios.get(fid)
+        return float(np.median(r)) if r else self.s.v_over_h_prior
+
+    def _measure_trunk(
+        self, frame: RgbdFrame, depth_m: np.ndarray, K: Pinhole, T: RigidTransform
+    ) -> None:
+        from services.vision.trunk_mask import trunk_mask
+
+        mask = trunk_mask(frame, self.s.trunk_max_depth_m, self.trunk_hsv)
+        fix = measure_trunk(mask, depth_m, K, T, self.trunk_params)
+        self.trunk_pixels = int(mask.sum())
+        if isinstance(fix, TrunkFailure):
+            self.counters[fix.reason] += 1
+        note = self.trunk.step(fix)
+        if note:
+            log.info("%s", note)
+
+    # ---- output --------------------------------------------------------------------------------
+    def _state(self, tracks: Tracks, problem: str) -> SceneState:
+        entries = self.fruits.sorted_entries()
+        selected_id = self.fruits.selected(self.target)
+        selected = self.fruits.entries.get(selected_id) if selected_id is not None else None
+        fruits = tuple(self._fruit(e, selected_id) for e in entries)
+        harvested = {k for k, m in self.fruits.marks.items() if m == "harvested"}
+        obstacles = build_obstacles(
+            entries,
+            harvested,
+            self.trunk.state,
+            selected,
+            self.s.trunk_default_radius_m,
+            self.s.trunk_tool_margin_m,
+        )
+        return SceneState(
+            header=self.stamper.answer(TOPIC_OUT, tracks.header, frame_id="world"),
+            fruits=fruits,
+            trunk=self._trunk(),
+            obstacles=obstacles,
+            selected_fruit_id=selected_id,
+            input_problem=problem,
+        )
+
+    def _to_cam(self, p_world: np.ndarray) -> np.ndarray:
+        assert self.T is not None  # an entry or a trunk exists only after a frame was used
+        return (p_world - self.T.t_m) @ self.T.R
+
+    def _fruit(self, e: Entry, selected_id: int | None) -> Fruit:
+        mark = self.fruits.marks.get(e.fruit_id)
+        status = mark or ("selected" if e.fruit_id == selected_id else "candidate")
+        p_cam = self._to_cam(e.state.position_world_m)
+        return Fruit(
+            fruit_id=e.fruit_id,
+            position_cam_m=vec3(p_cam),
+            position_world_m=vec3(e.state.position_world_m),
+            semi_axis_h_m=e.state.semi_axis_h_m,
+            semi_axis_v_m=e.state.semi_axis_v_m,
+            distance_m=float(np.linalg.norm(p_cam)),
+            status=status,
+            frames_unseen=e.frames_unseen,
+            last_seen_stamp_ns=e.last_seen_stamp_ns,
+            flags=e.flags,
+        )
+
+    def _trunk(self) -> Trunk:
+        t = self.trunk.state
+        if t is None:
+            return Trunk(found=False, pixel_count=self.trunk_pixels)
+        return Trunk(
+            found=True,
+            position_cam_m=vec3(self._to_cam(t.axis_world_m)),
+            position_world_m=vec3(t.axis_world_m),
+            radius_m=t.radius_m,
+            pixel_count=self.trunk_pixels,
+            frames_unseen=t.frames_unseen,
+        )
+
+
+def _failure_flag(f: EstimateFailure) -> FruitFlag:
+    if f.reason == "depth_invalid":
+        return "depth_invalid"
+    if f.reason == "depth_inconsistent":
+        return "depth_inconsistent"
+    return "box_invalid"

@@ -1,0 +1,95 @@
+"""One track: Kalman state, life cycle (tentative → confirmed → deleted), gallery and depth."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+
+import numpy as np
+
+from services.tracker.appearance import Gallery
+from services.tracker.kalman_filter import KalmanFilter, xyah_to_xyxy, xyxy_to_xyah
+
+
+class TrackState(Enum):
+    TENTATIVE = 1
+    CONFIRMED = 2
+    DELETED = 3
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """A detection as the tracker uses it: box (px), score, descriptor and depth when known."""
+
+    xyxy_px: np.ndarray
+    score: float
+    feature: np.ndarray | None = None
+    depth_m: float | None = None
+
+
+class Track:
+    """A tracked fruit. Tentative until ``n_init`` consecutive hits; a tentative track missed
+    once is deleted; a confirmed one after more than ``max_age`` frames without a hit."""
+
+    def __init__(
+        self,
+        track_id: int,
+        kf: KalmanFilter,
+        m: Measurement,
+        n_init: int,
+        max_age: int,
+        nn_budget: int,
+        depth_smoothing: float,
+    ) -> None:
+        self.track_id = track_id
+        self.mean, self.cov = kf.initiate(xyxy_to_xyah(m.xyxy_px))
+        self.hits = 1
+        self.age = 0
+        self.time_since_update = 0
+        self.state = TrackState.TENTATIVE if n_init > 1 else TrackState.CONFIRMED
+        self.gallery = Gallery(nn_budget)
+        self.gallery.add(m.feature)
+        self.score = m.score
+        self.depth_m = m.depth_m
+        self._n_init, self._max_age, self._alpha = n_init, max_age, depth_smoothing
+
+    @property
+    def confirmed(self) -> bool:
+        return self.state is TrackState.CONFIRMED
+
+    @property
+    def deleted(self) -> bool:
+        return self.state is TrackState.DELETED
+
+    def xyxy(self) -> np.ndarray:
+        return xyah_to_xyxy(self.mean[:4])
+
+    def predict(self, kf: KalmanFilter, coast_velocity_decay: float = 1.0) -> None:
+        """One frame ahead. While the track coasts (missed last frame), its velocity decays:
+        fruit hang still, and a velocity learnt from a box shrinking behind an occluder would
+        otherwise carry the prediction away during a long occlusion."""
+        if self.time_since_update > 0:
+            self.mean[4:] *= coast_velocity_decay
+        self.mean, self.cov = kf.predict(self.mean, self.cov)
+        self.age += 1
+        self.time_since_update += 1
+
+    def update(self, kf: KalmanFilter, m: Measurement) -> None:
+        self.mean, self.cov = kf.update(self.mean, self.cov, xyxy_to_xyah(m.xyxy_px))
+        self.gallery.add(m.feature)
+        self.score = m.score
+        if m.depth_m is not None:
+            # Depth from one box is noisy (leaf edges, fruit rim): smooth it.
+            self.depth_m = (
+                m.depth_m
+                if self.depth_m is None
+                else (1 - self._alpha) * self.depth_m + self._alpha * m.depth_m
+            )
+        self.hits += 1
+        self.time_since_update = 0
+        if self.state is TrackState.TENTATIVE and self.hits >= self._n_init:
+            self.state = TrackState.CONFIRMED
+
+    def mark_missed(self) -> None:
+        if self.state is TrackState.TENTATIVE or self.time_since_update > self._max_age:
+            self.state = TrackState.DELETED

@@ -1,0 +1,171 @@
+"""The multi-object tracker: Deep SORT's predict → cascade → IoU → birth/death, per frame.
+
+1. Every track is predicted one frame ahead (Kalman).
+2. Confirmed tracks are matched to detections by a cascade over the frames since their last
+   hit (1, 2, ..., max_age). The cost mixes the cosine distance of the appearance gallery and
+   the Mahalanobis distance of the box (normalised by the gate), gated by the chi-square 0.95
+   bound, by ``max_cosine_distance`` and, when depth is known, by ``max_depth_jump_m``.
+3. Tentative tracks, and confirmed tracks missed for exactly one frame, are matched to what is
+   left by IoU (``max_iou_distance`` = 1 - IoU).
+4. (Our addition for fruit.) Confirmed tracks still unmatched are matched to what is left by
+   containment: intersection over the smaller box (>= ``min_containment``), under the depth
+   gate (not the appearance gate: the occluder is inside the box). A fruit that a hand half
+   covers shrinks to its visible part and grows back when the hand leaves; neither the
+   Mahalanobis gate nor IoU accepts that jump, and Deep SORT would start a new ID for it.
+5. Unmatched tracks are marked missed; unmatched detections start tentative tracks with IDs
+   from this tracker's own counter (1, 2, ...).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from services.tracker.appearance import appearance_distances
+from services.tracker.kalman_filter import CHI2INV95, KalmanFilter, xyxy_to_xyah
+from services.tracker.linear_assignment import (
+    INFTY_COST,
+    iou,
+    matching_cascade,
+    min_cost_matching,
+)
+from services.tracker.track import Measurement, Track
+
+
+@dataclass(frozen=True)
+class TrackerParams:
+    """Deep SORT's hyper-parameters; the defaults are the paper's (§III-B)."""
+
+    max_cosine_distance: float = 0.2
+    max_iou_distance: float = 0.5
+    max_age: int = 300
+    n_init: int = 10
+    nn_budget: int = 30
+    appearance_weight: float = 0.5
+    max_depth_jump_m: float = 0.25
+    depth_smoothing: float = 0.3
+    min_containment: float = 0.5
+    coast_velocity_decay: float = 0.8
+
+
+class Tracker:
+    """``predict()`` then ``update(measurements)`` once per frame, also with no measurements."""
+
+    def __init__(self, params: TrackerParams | None = None) -> None:
+        self.p = params or TrackerParams()
+        self.kf = KalmanFilter()
+        self.tracks: list[Track] = []
+        self._next_id = 1  # per instance: two trackers never share a counter
+
+    def predict(self) -> None:
+        for t in self.tracks:
+            t.predict(self.kf, self.p.coast_velocity_decay)
+
+    def update(self, dets: Sequence[Measurement]) -> dict[int, int]:
+        """Update with this frame's measurements; returns detection index → track ID."""
+        matches, unmatched_tracks, unmatched_dets = self._match(dets)
+        for ti, di in matches:
+            self.tracks[ti].update(self.kf, dets[di])
+        for ti in unmatched_tracks:
+            self.tracks[ti].mark_missed()
+        assigned = {di: self.tracks[ti].track_id for ti, di in matches}
+        for di in unmatched_dets:
+            t = Track(
+                self._next_id,
+                self.kf,
+                dets[di],
+                self.p.n_init,
+                self.p.max_age,
+                self.p.nn_budget,
+                self.p.depth_smoothing,
+            )
+            assigned[di] = t.track_id
+            self._next_id += 1
+            self.tracks.append(t)
+        self.tracks = [t for t in self.tracks if not t.deleted]
+        return assigned
+
+    # ---- matching --------------------------------------------------------------------------
+    def _gated_cost(self, tis: Sequence[int], dis: Sequence[int], dets: Sequence[Measurement]):
+        gate = CHI2INV95[4]
+        zs = xyxy_to_xyah(np.stack([dets[d].xyxy_px for d in dis]))
+        feats = [dets[d].feature for d in dis]
+        depths = np.array([np.nan if dets[d].depth_m is None else dets[d].depth_m for d in dis])
+        w = self.p.appearance_weight
+        mahas = self.kf.gating_distances(
+            np.stack([self.tracks[ti].mean for ti in tis]),
+            np.stack([self.tracks[ti].cov for ti in tis]),
+            zs,
+        )
+        app = appearance_distances([self.tracks[ti].gallery for ti in tis], feats)
+        cost = np.where(np.isnan(app), mahas / gate, w * app + (1 - w) * mahas / gate)
+        bad = mahas > gate
+        bad |= np.nan_to_num(app, nan=0.0) > self.p.max_cosine_distance
+        bad |= self._depth_jumps(tis, depths)
+        return np.where(bad, INFTY_COST, cost)
+
+    def _depth_jumps(self, tis: Sequence[int], depths: np.ndarray) -> np.ndarray:
+        """(T, N) True where both depths are known and differ by more than the gate."""
+        td = np.array(
+            [np.nan if self.tracks[t].depth_m is None else self.tracks[t].depth_m for t in tis]
+        )
+        with np.errstate(invalid="ignore"):
+            jump = np.abs(td[:, None] - depths[None, :])
+        return np.nan_to_num(jump, nan=0.0) > self.p.max_depth_jump_m
+
+    def _iou_cost(self, tis: Sequence[int], dis: Sequence[int], dets: Sequence[Measurement]):
+        boxes = np.stack([dets[d].xyxy_px for d in dis])
+        cost = np.empty((len(tis), len(dis)))
+        for r, ti in enumerate(tis):
+            t = self.tracks[ti]
+            cost[r] = INFTY_COST if t.time_since_update > 1 else 1.0 - iou(t.xyxy(), boxes)
+        return cost
+
+    def _containment_cost(
+        self, tis: Sequence[int], dis: Sequence[int], dets: Sequence[Measurement]
+    ):
+        boxes = np.stack([dets[d].xyxy_px for d in dis])
+        area = np.prod(boxes[:, 2:] - boxes[:, :2], axis=1)
+        depths = np.array([np.nan if dets[d].depth_m is None else dets[d].depth_m for d in dis])
+        cost = np.empty((len(tis), len(dis)))
+        for r, ti in enumerate(tis):
+            t = self.tracks[ti]
+            tb = t.xyxy()
+            lt = np.maximum(tb[:2], boxes[:, :2])
+            rb = np.minimum(tb[2:], boxes[:, 2:])
+            inter = np.prod(np.clip(rb - lt, 0, None), axis=1)
+            tarea = max(float(np.prod(tb[2:] - tb[:2])), 1e-6)
+            cost[r] = 1.0 - inter / np.maximum(np.minimum(area, tarea), 1e-6)
+        return np.where(self._depth_jumps(tis, depths), INFTY_COST, cost)
+
+    def _match(self, dets: Sequence[Measurement]):
+        confirmed = [i for i, t in enumerate(self.tracks) if t.confirmed]
+        unconfirmed = [i for i, t in enumerate(self.tracks) if not t.confirmed]
+        all_dets = list(range(len(dets)))
+        m_a, um_a, ud = matching_cascade(
+            lambda ti, di: self._gated_cost(ti, di, dets),
+            1.0,
+            self.p.max_age,
+            confirmed,
+            all_dets,
+            lambda i: self.tracks[i].time_since_update,
+        )
+        iou_candidates = unconfirmed + [i for i in um_a if self.tracks[i].time_since_update == 1]
+        um_a = [i for i in um_a if self.tracks[i].time_since_update != 1]
+        m_b, um_b, ud = min_cost_matching(
+            lambda ti, di: self._iou_cost(ti, di, dets),
+            self.p.max_iou_distance,
+            iou_candidates,
+            ud,
+        )
+        left = sorted(set(um_a + um_b))
+        m_c, _, ud = min_cost_matching(
+            lambda ti, di: self._containment_cost(ti, di, dets),
+            1.0 - self.p.min_containment,
+            [i for i in left if self.tracks[i].confirmed],
+            ud,
+        )
+        matched_c = {ti for ti, _ in m_c}
+        return m_a + m_b + m_c, [i for i in left if i not in matched_c], ud

@@ -1,0 +1,158 @@
+"""Detector: network shapes and decoding, targets and losses, weights checks, data checks,
+COCO AP, the HSV baseline, and a seeded, resumable training run."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import torch
+
+from services.detector.data import DatasetError, load_dataset
+from services.detector.evaluate import coco_ap, greedy_matches, iou_matrix
+from services.detector.hsv import HsvDetector
+from services.detector.infer import OrangeDetector, WeightsError, load_weights, save_weights
+from services.detector.net import NetConfig, OrangeNet, decode
+from services.detector.targets import focal_loss, giou_loss, make_targets
+from services.testkit.scene2d import Scene2D
+
+SMALL = NetConfig(widths=(8, 8, 16, 16), blocks=(1, 1, 1), neck=8, input_w_px=64, input_h_px=48)
+
+
+def test_network_output_shapes_and_decoding_of_a_single_peak() -> None:
+    net = OrangeNet(SMALL).eval()
+    hm, ltrb = net(torch.rand(2, 3, 48, 64))
+    assert hm.shape == (2, 1, 12, 16) and ltrb.shape == (2, 4, 12, 16)
+    assert (ltrb >= 0).all()
+    logits = torch.full((1, 1, 12, 16), -10.0)
+    logits[0, 0, 5, 7] = 5.0
+    dist = torch.full((1, 4, 12, 16), 6.0)
+    (boxes,) = decode(logits, dist, 4, 0.5, 10)
+    np.testing.assert_allclose(boxes[0, :4].numpy(), [24, 16, 36, 28])  # centre (30, 22)
+
+
+def test_targets_peak_at_box_centres_and_a_perfect_box_has_zero_giou_loss() -> None:
+    boxes = np.array([[10, 10, 26, 26], [40, 20, 56, 44]], np.float32)
+    heat, box_t, weight = make_targets(boxes, 12, 16, 4)
+    assert heat.max() == 1.0 and int((heat == 1.0).sum()) == 2
+    assert heat[0, 4, 4] == 1.0  # centre (18, 18) px is the centre of cell (4, 4) at stride 4
+    ys, xs = np.nonzero(weight[0])
+    cx, cy = (xs + 0.5) * 4, (ys + 0.5) * 4
+    t = box_t[:, ys, xs]
+    ltrb = np.zeros((1, 4, 12, 16), np.float32)
+    ltrb[0, :, ys, xs] = np.stack([cx - t[0], cy - t[1], t[2] - cx, t[3] - cy], 1)
+    loss = giou_loss(
+        torch.from_numpy(ltrb), torch.from_numpy(box_t[None]), torch.from_numpy(weight[None]), 4
+    )
+    assert float(loss) < 1e-4
+    logits = torch.logit(torch.from_numpy(heat[None]).clamp(1e-4, 1 - 1e-4))
+    perfect = float(focal_loss(logits, torch.from_numpy(heat[None])))
+    assert (
+        perfect < 0.05 < float(focal_loss(torch.zeros_like(logits), torch.from_numpy(heat[None])))
+    )
+
+
+def test_weights_that_are_missing_or_do_not_match_are_refused_with_path_and_reason(
+    tmp_path: Path,
+) -> None:
+    with pytest.raises(WeightsError, match=r"nothere\.pt: not found"):
+        load_weights(tmp_path / "nothere.pt")
+    junk = tmp_path / "junk.pt"
+    junk.write_bytes(b"not a torch file")
+    with pytest.raises(WeightsError, match="cannot be read"):
+        load_weights(junk)
+    other = tmp_path / "other.pt"
+    torch.save({"arch": "yolo", "state_dict": {}}, other)
+    with pytest.raises(WeightsError, match="architecture 'yolo'"):
+        load_weights(other)
+    good = tmp_path / "small.pt"
+    save_weights(good, OrangeNet(SMALL), {"version": "t"})
+    blob = torch.load(good, weights_only=True)
+    blob["config"]["neck"] = 12  # the saved tensors no longer fit the architecture
+    torch.save(blob, tmp_path / "bad.pt")
+    with pytest.raises(WeightsError, match="does not match the architecture"):
+        load_weights(tmp_path / "bad.pt")
+    assert load_weights(good).version == "t"
+
+
+def write_dataset(root: Path, n: int, seed: int) -> Path:
+    entries = []
+    for k in range(n):
+        f = Scene2D(seed=seed + k, n_fruit=5, sweep=None, width_px=160, height_px=120).frame(0)
+        name = f"img{seed}_{k}.png"
+        cv2.imwrite(str(root / name), cv2.cvtColor(f.frame.rgb, cv2.COLOR_RGB2BGR))
+        boxes = [list(v.box_xyxy_px) for v in f.fruits if v.box_xyxy_px is not None]
+        entries.append({"image": name, "width": 160, "height": 120, "boxes": boxes})
+    path = root / f"set{seed}.json"
+    path.write_text(json.dumps(entries))
+    return path
+
+
+def test_dataset_errors_name_the_file_and_the_entry(tmp_path: Path) -> None:
+    with pytest.raises(DatasetError, match="not found"):
+        load_dataset(tmp_path / "none.json")
+    p = tmp_path / "bad.json"
+    p.write_text(
+        json.dumps([{"image": "a.png", "width": 10, "height": 10, "boxes": [[5, 5, 1, 1]]}])
+    )
+    with pytest.raises(DatasetError, match="entry 0: an inverted box"):
+        load_dataset(p)
+    good = write_dataset(tmp_path, 1, 0)
+    (s,) = load_dataset(good)
+    s2 = type(s)(s.path, 99, 120, s.boxes_xyxy_px)
+    with pytest.raises(DatasetError, match="is 160x120 px, the data set says 99x120"):
+        s2.load_rgb()
+
+
+def test_coco_ap_of_perfect_and_of_half_wrong_detections() -> None:
+    gt = [np.array([[0, 0, 10, 10], [20, 20, 40, 40]], float)]
+    perfect = [np.c_[gt[0], [0.9, 0.8]]]
+    assert coco_ap(gt, perfect) == pytest.approx((1.0, 1.0))
+    half = [np.array([[0, 0, 10, 10, 0.9], [60, 60, 70, 70, 0.95]], float)]
+    ap50, _ = coco_ap(gt, half)
+    assert 0.2 < ap50 < 0.6
+    assert greedy_matches(gt[0], half[0]) == 1
+    assert iou_matrix(gt[0], gt[0]).diagonal().tolist() == [1.0, 1.0]
+
+
+def test_hsv_baseline_finds_the_scripted_fruit() -> None:
+    f = Scene2D(seed=3, n_fruit=6, sweep=None).frame(0)
+    d = HsvDetector().detect(f.frame.rgb)
+    gt = np.array([v.box_xyxy_px for v in f.fruits])
+    assert greedy_matches(gt, d) >= 5
+
+
+def test_training_is_seeded_and_resumes_to_the_same_weights(tmp_path: Path) -> None:
+    from services.detector.train import DataSpec, TrainConfig, train
+
+    train_set = write_dataset(tmp_path, 4, 10)
+    val_set = write_dataset(tmp_path, 2, 20)
+
+    def cfg(out: str, epochs: int) -> TrainConfig:
+        return TrainConfig(
+            train=[DataSpec(str(train_set))],
+            val=[DataSpec(str(val_set))],
+            out_dir=str(tmp_path / out),
+            weights_out=str(tmp_path / out / "w.pt"),
+            epochs=epochs,
+            iters_per_epoch=2,
+            batch=2,
+            eval_every=1,
+            warmup_iters=1,
+            net=SMALL.to_dict(),
+        )
+
+    quiet = lambda _: None  # noqa: E731
+    train(cfg("a", 2), log=quiet)
+    train(cfg("b", 1), log=quiet)
+    summary = train(cfg("b", 2), resume=True, log=quiet)
+    a = torch.load(tmp_path / "a" / "last.pt", weights_only=False)["model"]
+    b = torch.load(tmp_path / "b" / "last.pt", weights_only=False)["model"]
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    assert [h["epoch"] for h in summary["history"]] == [0, 1]
+    assert "set20/ap50" in summary["best"]["metrics"]
+    det = OrangeDetector(load_weights(tmp_path / "b" / "best.pt").net, score_min=0.0)
+    assert det.detect(np.zeros((120, 160, 3), np.uint8)).shape[1] == 5

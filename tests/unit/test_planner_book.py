@@ -1,0 +1,95 @@
+"""The planner's fruit book: identity across track IDs, duplicates, fruit in the basket."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from schemas.base import Header
+from schemas.scene import Fruit, Obstacles, SceneState, Trunk
+from services.planner.book import FruitBook, inside_dish
+from services.planner.kinematics import DishPose
+
+
+def fruit(fid: int, p: tuple[float, float, float], unseen: int = 0, stamp: int = 0) -> Fruit:
+    return Fruit(
+        fruit_id=fid,
+        position_cam_m=(0.0, 0.0, 0.6),
+        position_world_m=p,
+        semi_axis_h_m=0.04,
+        semi_axis_v_m=0.038,
+        distance_m=0.6,
+        status="candidate",
+        frames_unseen=unseen,
+        last_seen_stamp_ns=stamp,
+    )
+
+
+def scene(*fruits: Fruit, seq: int = 0) -> SceneState:
+    return SceneState(
+        header=Header(stamp_ns=seq, seq=seq, source="scene"),
+        fruits=fruits,
+        trunk=Trunk(found=False),
+        obstacles=Obstacles(),
+    )
+
+
+def never(_: Fruit) -> bool:
+    return False
+
+
+def test_a_new_id_taking_over_a_fruit_is_a_switch_not_a_new_fruit() -> None:
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    b.update(scene(fruit(3, (0.6, 0.0, 1.3))), never)
+    b.update(scene(fruit(3, (0.6, 0.0, 1.3), unseen=4), fruit(9, (0.61, 0.0, 1.3))), never)
+    assert list(b.records) == [3]
+    r = b.records[3]
+    assert r.fruit_id == 9 and r.ids == [3, 9] and b.switches == [(3, 3, 9)]
+    # The old ID, still listed and stale, does not take the record back.
+    b.update(scene(fruit(3, (0.6, 0.0, 1.3), unseen=5), fruit(9, (0.61, 0.0, 1.3))), never)
+    assert r.fruit_id == 9
+    assert b.ignore_ids(r) == (3, 9)
+
+
+def test_a_new_id_beside_a_visible_fruit_is_another_fruit() -> None:
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    b.update(scene(fruit(3, (0.6, 0.0, 1.3))), never)
+    b.update(scene(fruit(3, (0.6, 0.0, 1.3)), fruit(4, (0.6, 0.2, 1.3))), never)
+    assert sorted(b.records) == [3, 4]
+
+
+def test_a_stale_duplicate_of_a_finished_fruit_is_never_a_candidate() -> None:
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    b.update(scene(fruit(3, (0.6, 0.0, 1.3))), never)
+    b.records[3].outcome = "harvested"
+    b.update(scene(fruit(12, (0.6, 0.01, 1.3))), never)
+    assert list(b.records) == [3] and b.candidates(45) == []
+    assert b.ignore_ids(None) == (3, 12)  # off the tree: not an obstacle any more
+
+
+def test_small_moves_keep_the_planning_position_large_ones_replan() -> None:
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    b.update(scene(fruit(3, (0.6, 0.0, 1.3))), never)
+    b.update(scene(fruit(3, (0.61, 0.0, 1.3))), never)
+    assert b.records[3].planned.centre_world_m[0] == 0.6 and b.moved == []
+    b.update(scene(fruit(3, (0.62, 0.0, 1.3))), never)
+    assert b.records[3].planned.centre_world_m[0] == 0.62
+    assert [k for k, _ in b.moved] == [3]
+
+
+def test_fruit_seen_in_the_dish_and_stale_fruit_are_not_candidates() -> None:
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    in_dish = {5}
+    b.update(
+        scene(fruit(4, (0.6, 0.0, 1.3)), fruit(5, (0.5, -0.1, 0.9)), fruit(6, (0.7, 0, 1.4), 50)),
+        lambda f: f.fruit_id in in_dish,
+    )
+    assert [r.key for r in b.candidates(45)] == [4]
+    assert [r.key for r in b.detected()] == [4, 6]
+    assert b.ignore_ids(None) == (5,)
+
+
+def test_inside_dish_tells_a_resting_fruit_from_the_one_hanging_over_the_dish() -> None:
+    dish = DishPose(np.array([0.6, 0.0, 1.0]), np.array([0.0, 0.0, 1.0]))
+    assert inside_dish(np.array([0.62, 0.01, 1.04]), dish, 0.02)  # resting: centre d_v up
+    assert not inside_dish(np.array([0.6, 0.0, 1.0 + 0.045 + 0.01 + 0.03]), dish, 0.02)
+    assert not inside_dish(np.array([0.75, 0.0, 1.04]), dish, 0.02)  # beside the dish

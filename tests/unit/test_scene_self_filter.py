@@ -1,0 +1,123 @@
+"""The scene's robot self-filter (an estimate inside the arm's capsules at the frame's joint
+state is the robot, not a fruit) and its colour rule (a box on a hand is not a fruit)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from schemas.base import Header
+from schemas.robot import ArmJointState, JointState
+from services.robot.clearance import RobotBody
+from services.robot.model import HOME_RAD, joint_names
+from services.runtime.settings import load_settings
+from services.scene import Settings
+from services.scene.core import SceneCore
+from tests.scene_helpers import R_WORLD_CAM, T_WORLD_CAM_M, Scene, tracks
+
+SKIN = (230, 180, 150)
+
+
+def joint_state(stamp_ns: int) -> JointState:
+    arms = {
+        role: ArmJointState(names=joint_names(role), position_rad=q, velocity_rad_s=(0.0,) * 7)
+        for role, q in HOME_RAD.items()
+    }
+    return JointState(header=Header(stamp_ns=stamp_ns, seq=0, source="sim"), arms=arms)
+
+
+def to_cam(p_world: np.ndarray) -> np.ndarray:
+    return (p_world - T_WORLD_CAM_M) @ R_WORLD_CAM
+
+
+def link_point_in_view() -> np.ndarray:
+    """A point on an arm link's axis (HOME_RAD) that the level test camera sees 0.3-1.2 m
+    ahead, near the image centre."""
+    best = None
+    for a, b, _r in RobotBody().capsules(HOME_RAD)[:-1]:
+        for t in np.linspace(0, 1, 21):
+            c = to_cam(a + t * (b - a))
+            if 0.3 < c[2] < 1.2 and abs(c[0]) < 0.25 * c[2] and abs(c[1]) < 0.2 * c[2]:
+                best = c
+    assert best is not None, "no arm link in the test camera's view"
+    return best
+
+
+def run(scene: Scene, box: tuple, with_joints: bool, **settings: object) -> tuple[SceneCore, int]:
+    core = SceneCore(load_settings(Settings, settings))
+    if with_joints:
+        core.handle("robot/joint_state", joint_state(1000))
+    core.handle("camera/rgbd", scene.frame(seq=0, stamp_ns=1000))
+    outs = core.handle("perception/tracks", tracks(0, 1000, 0, {7: box}))
+    (state,) = [m for t, m in outs if t == "scene/state"]
+    return core, len(state.fruits)
+
+
+def test_an_orange_blob_on_the_arm_is_the_robot_not_a_fruit() -> None:
+    c = link_point_in_view()
+    s = Scene()
+    s.ellipsoid(c - np.array([0, 0, 0.04]), a=0.04, c=0.04)  # its front surface on the link
+    box = s.box()
+    core, n = run(s, box, with_joints=True)
+    assert n == 0 and core.counters["fruit_on_robot"] == 1
+    _, n = run(s, box, with_joints=False)  # no joint state: no self-filter, the blob is kept
+    assert n == 1
+
+
+def test_a_fruit_beside_the_arm_is_kept() -> None:
+    c = link_point_in_view()
+    s = Scene()
+    s.ellipsoid(c + np.array([0.25, 0.0, 0.0]), a=0.04, c=0.04)
+    core, n = run(s, s.box(), with_joints=True)
+    assert n == 1 and core.counters["fruit_on_robot"] == 0
+
+
+def test_tracks_wait_for_the_joint_state_of_their_frame() -> None:
+    s = Scene()
+    s.ellipsoid((0.1, 0.0, 0.6), a=0.04, c=0.04)
+    core = SceneCore(load_settings(Settings, {}))
+    core.handle("robot/joint_state", joint_state(500))
+    core.handle("camera/rgbd", s.frame(seq=0, stamp_ns=1000))
+    assert core.handle("perception/tracks", tracks(0, 1000, 0, {1: s.box()})) == []
+    (out,) = core.handle("robot/joint_state", joint_state(1000))
+    assert out[0] == "scene/state" and len(out[1].fruits) == 1
+
+
+def test_a_box_on_a_skin_coloured_hand_is_not_a_fruit() -> None:
+    s = Scene()
+    s.ellipsoid((0.0, 0.0, 0.6), a=0.05, c=0.07, colour=SKIN)
+    core, n = run(s, s.box(), with_joints=False)
+    assert n == 0 and core.counters["fruit_not_fruit_coloured"] == 1
+    core, n = run(s, s.box(), with_joints=False, min_colour_share=0.0)
+    assert n == 1
+
+
+def test_the_obstacle_radius_follows_the_planners_target() -> None:
+    from schemas.harvest import HarvestEvent
+
+    s = Scene()
+    s.ellipsoid((-0.1, 0.0, 0.5), a=0.04, c=0.04, label=1)
+    s.ellipsoid((0.1, 0.0, 0.8), a=0.04, c=0.04, label=2)
+    s.vertical_cylinder((1.2, 0.0), 0.06)
+    core = SceneCore(load_settings(Settings, {}))
+
+    def step(stamp: int) -> object:
+        core.handle("camera/rgbd", s.frame(seq=stamp, stamp_ns=stamp))
+        boxes = {1: s.box(1), 2: s.box(2)}
+        ((_, state),) = core.handle("perception/tracks", tracks(stamp, stamp, stamp, boxes))
+        return state
+
+    assert step(1).selected_fruit_id == 1  # nearest first (the paper)
+    ev = HarvestEvent(
+        header=Header(stamp_ns=2, seq=0, source="planner"), event="fruit_selected", fruit_id=2
+    )
+    core.handle("harvest/events", ev)
+    st = step(3)
+    assert st.selected_fruit_id == 2
+    far = st.fruits[1]
+    axis = st.obstacles.cylinders[0].axis_point_world_m
+    horizontal = np.hypot(far.position_world_m[0] - axis[0], far.position_world_m[1] - axis[1])
+    expected = horizontal - far.semi_axis_h_m - core.s.trunk_tool_margin_m
+    assert abs(st.obstacles.cylinders[0].radius_m - expected) < 1e-9
+    done = ev.model_copy(update={"event": "fruit_collected", "outcome": "harvested"})
+    core.handle("harvest/events", done)
+    assert step(4).selected_fruit_id == 1

@@ -1,0 +1,106 @@
+"""Tracker: Kalman gating, life cycle, per-instance IDs, occlusion handling, cascade order."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from services.tracker.kalman_filter import CHI2INV95, KalmanFilter, xyah_to_xyxy, xyxy_to_xyah
+from services.tracker.linear_assignment import matching_cascade, min_cost_matching
+from services.tracker.track import Measurement
+from services.tracker.tracker import Tracker, TrackerParams
+
+BOX_A = np.array([100.0, 100.0, 140.0, 140.0])
+BOX_B = np.array([300.0, 200.0, 350.0, 250.0])
+
+
+def m(box: np.ndarray, depth: float | None = None, feature: np.ndarray | None = None):
+    return Measurement(np.asarray(box, float), 0.9, feature, depth)
+
+
+def step(tr: Tracker, boxes: list[np.ndarray], depths: list[float | None] | None = None):
+    tr.predict()
+    depths = depths or [None] * len(boxes)
+    return tr.update([m(b, d) for b, d in zip(boxes, depths, strict=True)])
+
+
+def test_box_conversions_round_trip() -> None:
+    np.testing.assert_allclose(xyah_to_xyxy(xyxy_to_xyah(BOX_B)), BOX_B)
+
+
+def test_gate_accepts_the_predicted_box_and_rejects_a_far_one() -> None:
+    kf = KalmanFilter()
+    mean, cov = kf.initiate(xyxy_to_xyah(BOX_A))
+    mean, cov = kf.predict(mean, cov)
+    d = kf.gating_distance(mean, cov, xyxy_to_xyah(np.stack([BOX_A, BOX_B])))
+    assert d[0] < 1.0 < CHI2INV95[4] < d[1]
+
+
+def test_track_is_confirmed_after_n_init_hits_and_ids_are_per_instance() -> None:
+    a, b = Tracker(TrackerParams(n_init=3)), Tracker(TrackerParams(n_init=3))
+    for k in range(3):
+        ids = step(a, [BOX_A, BOX_B])
+        assert [t.confirmed for t in a.tracks] == [k == 2] * 2
+    assert ids == {0: 1, 1: 2}
+    assert step(b, [BOX_B]) == {0: 1}  # a second tracker counts from 1 on its own
+
+
+def test_tentative_track_is_deleted_after_one_miss() -> None:
+    tr = Tracker(TrackerParams(n_init=3))
+    step(tr, [BOX_A])
+    step(tr, [])
+    assert tr.tracks == []
+    assert step(tr, [BOX_A]) == {0: 2}  # a new track, a new ID
+
+
+def test_track_id_survives_full_occlusion() -> None:
+    tr = Tracker(TrackerParams(n_init=3))
+    for _ in range(5):
+        step(tr, [BOX_A, BOX_B])
+    for _ in range(100):  # fully hidden for 100 frames (6.7 s at 15 Hz)
+        step(tr, [BOX_B])
+    assert step(tr, [BOX_A, BOX_B]) == {0: 1, 1: 2}
+
+
+def test_confirmed_track_is_deleted_after_max_age() -> None:
+    tr = Tracker(TrackerParams(n_init=2, max_age=5))
+    for _ in range(3):
+        step(tr, [BOX_A])
+    for _ in range(6):
+        step(tr, [])
+    assert tr.tracks == []
+
+
+def test_fruit_growing_back_out_of_a_partial_occlusion_keeps_its_id() -> None:
+    tr = Tracker(TrackerParams(n_init=2))
+    full = np.array([100.0, 100.0, 160.0, 160.0])
+    for _ in range(5):
+        step(tr, [full], [0.7])
+    sliver = np.array([110.0, 150.0, 140.0, 160.0])  # a hand covers all but the bottom
+    for _ in range(8):
+        step(tr, [sliver], [0.7])
+    assert step(tr, [full], [0.7]) == {0: 1}
+
+
+def test_depth_gate_refuses_a_fruit_at_another_depth() -> None:
+    tr = Tracker(TrackerParams(n_init=2))
+    for _ in range(5):
+        step(tr, [BOX_A], [0.6])
+    for _ in range(3):
+        step(tr, [], [])
+    # Same place in the image, 0.5 m further back: another fruit, not the hidden one.
+    assert step(tr, [BOX_A], [1.1]) == {0: 2}
+
+
+def test_min_cost_matching_leaves_costly_pairs_unmatched() -> None:
+    cost = np.array([[0.1, 0.9], [0.8, 0.95]])
+    matches, ut, ud = min_cost_matching(lambda t, d: cost[np.ix_(t, d)], 0.5, [0, 1], [0, 1])
+    assert matches == [(0, 0)] and ut == [1] and ud == [1]
+
+
+def test_cascade_gives_a_detection_to_the_most_recently_seen_track() -> None:
+    cost = np.array([[0.3], [0.1]])  # the older track (1) is even the cheaper one
+    tsu = {0: 1, 1: 5}
+    matches, unmatched, _ = matching_cascade(
+        lambda t, d: cost[np.ix_(t, d)], 0.5, 300, [0, 1], [0], tsu.__getitem__
+    )
+    assert matches == [(0, 0)] and unmatched == [1]
