@@ -102,9 +102,15 @@ class Settings(ServiceSettings):
     robot_self_filter: bool = Field(
         default=True,
         description="Drop a fruit estimate that lies inside the robot's own arms or tools (the "
-        "LWR's orange links look like oranges): capsules at the joint state of the frame's "
-        "stamp. Once a joint state has been received, a Tracks message waits for the joint "
-        "state of its frame.",
+        "LWR's orange links look like oranges): capsules at the last joint state before the "
+        "frame's stamp. Once a joint state has been received, a Tracks message waits for it.",
+    )
+    joint_state_max_lag_ms: float = Field(
+        default=10.0,
+        gt=0,
+        le=1000,
+        description="The self-filter uses the last joint state before the frame's stamp, at most "
+        "this much older (the sim's control period is 8.3 ms), ms.",
     )
     self_filter_share: float = Field(
         default=0.5,

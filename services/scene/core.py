@@ -11,10 +11,13 @@ frame will not come (a newer frame arrived, or it is older than the newest frame
 the buffer) is answered at once: the last state, unchanged, ``input_problem`` saying why
 (counted). At most ``frame_buffer`` Tracks messages wait; past that the oldest is answered so.
 
-The robot self-filter (``robot_self_filter``) needs the joint state of the frame's stamp (the
-sim publishes it in the same tick as the frame, on another key): once a joint state has been
-received, a Tracks message also waits until a joint state at or after its stamp is in, for the
-same reason. Estimates inside the arms' capsules are dropped and counted (``fruit_on_robot``).
+The robot self-filter (``robot_self_filter``) needs where the arms were when the frame was
+taken: the last joint state *before* the frame's stamp (at most ``joint_state_max_lag_ms``
+older). Not the one at the frame's stamp: in lock-step the sim publishes that one only after
+the frame's answers are in, this one among them (waiting for it would dead-lock). Once a joint
+state has been received, a Tracks message waits until that joint state is in (another key: it
+could in principle arrive late), so the answer never depends on delivery order. Estimates
+inside the arms' capsules are dropped and counted (``fruit_on_robot``).
 """
 
 from __future__ import annotations
@@ -100,6 +103,7 @@ class SceneCore:
         self.body = RobotBody() if s.robot_self_filter else None
         self.joints: OrderedDict[int, JointState] = OrderedDict()  # stamp → joint state
         self.newest_joint_ns: int | None = None
+        self.joint_lag_ns = round(s.joint_state_max_lag_ms * 1e6)
         self.frames: OrderedDict[int, RgbdFrame] = OrderedDict()
         self.newest_frame_ns: int | None = None
         self.waiting: list[Tracks] = []  # Tracks newer than every frame received so far
@@ -134,7 +138,7 @@ class SceneCore:
         stamp = t.header.stamp_ns
         if self.newest_frame_ns is None or stamp > self.newest_frame_ns:
             return False
-        return self.newest_joint_ns is None or stamp <= self.newest_joint_ns
+        return self.newest_joint_ns is None or stamp - self.joint_lag_ns <= self.newest_joint_ns
 
     def _release(self) -> list[Output]:
         """Answer the waiting Tracks messages that are due, in arrival order; past
@@ -274,11 +278,12 @@ class SceneCore:
         )
 
     def _robot_at(self, stamp_ns: int) -> tuple[Capsule, ...]:
-        """The arms' and tools' capsules at the frame's stamp (the dish's sphere left out: a
-        fruit in the dish is the planner's to judge); () without a joint state for it."""
+        """The arms' and tools' capsules just before the frame's stamp (the dish's sphere left
+        out: a fruit in the dish is the planner's to judge); () without a joint state for it."""
         if self.body is None or self.newest_joint_ns is None:
             return ()
-        js = self.joints.get(stamp_ns)
+        before = [k for k in self.joints if stamp_ns - self.joint_lag_ns <= k < stamp_ns]
+        js = self.joints[max(before)] if before else None
         if js is None:
             self.counters["joint_state_missing"] += 1
             return ()

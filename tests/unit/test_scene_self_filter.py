@@ -45,7 +45,7 @@ def link_point_in_view() -> np.ndarray:
 def run(scene: Scene, box: tuple, with_joints: bool, **settings: object) -> tuple[SceneCore, int]:
     core = SceneCore(load_settings(Settings, settings))
     if with_joints:
-        core.handle("robot/joint_state", joint_state(1000))
+        core.handle("robot/joint_state", joint_state(999))
     core.handle("camera/rgbd", scene.frame(seq=0, stamp_ns=1000))
     outs = core.handle("perception/tracks", tracks(0, 1000, 0, {7: box}))
     (state,) = [m for t, m in outs if t == "scene/state"]
@@ -71,15 +71,19 @@ def test_a_fruit_beside_the_arm_is_kept() -> None:
     assert n == 1 and core.counters["fruit_on_robot"] == 0
 
 
-def test_tracks_wait_for_the_joint_state_of_their_frame() -> None:
+def test_tracks_wait_for_the_last_joint_state_before_their_frame() -> None:
+    # Ticks every 8.3 ms, a frame at 100 ms: the joint state of the tick before (91.7 ms) is
+    # the one; the one at 100 ms comes only after the answer in lock-step (never awaited).
     s = Scene()
     s.ellipsoid((0.1, 0.0, 0.6), a=0.04, c=0.04)
     core = SceneCore(load_settings(Settings, {}))
-    core.handle("robot/joint_state", joint_state(500))
-    core.handle("camera/rgbd", s.frame(seq=0, stamp_ns=1000))
-    assert core.handle("perception/tracks", tracks(0, 1000, 0, {1: s.box()})) == []
-    (out,) = core.handle("robot/joint_state", joint_state(1000))
+    ms = 1_000_000
+    core.handle("robot/joint_state", joint_state(83 * ms + ms // 3))
+    core.handle("camera/rgbd", s.frame(seq=0, stamp_ns=100 * ms))
+    assert core.handle("perception/tracks", tracks(0, 100 * ms, 0, {1: s.box()})) == []
+    (out,) = core.handle("robot/joint_state", joint_state(91 * ms + 2 * ms // 3))
     assert out[0] == "scene/state" and len(out[1].fruits) == 1
+    assert core.counters["joint_state_missing"] == 0
 
 
 def test_a_box_on_a_skin_coloured_hand_is_not_a_fruit() -> None:
