@@ -4,6 +4,7 @@ by liveliness, restarts by policy, and stops them in order so the recording is f
 from __future__ import annotations
 
 import json
+import shutil
 import signal
 import sys
 import tempfile
@@ -88,6 +89,10 @@ class Supervisor:
         self._stop = threading.Event()
         self._interrupts = 0
         self._tmp = Path(tempfile.mkdtemp(prefix=f"{run_id}-"))
+        # Per-run state a restarted service takes up again (the planner's journal): empty at
+        # the start, so only a restarted process finds anything there; removed at the end.
+        self.state_dir = self._tmp / "state"
+        self.state_dir.mkdir()
         self.bus: Bus | None = None
         self.router: Child | None = None
         self._main_seen = False
@@ -179,8 +184,9 @@ class Supervisor:
             if name == self.stack.master and self.stack.mode == "lockstep":
                 extra = ["--lockstep-plan", self.lockstep_plan().model_dump_json()]
             argv = self._argv(name, settings[name].model_dump_json(), extra)
+            env = {"HARVEST_STATE_DIR": str(self.state_dir)}
             self.children[name] = Child(
-                ManagedProcess(name, argv, self.sink), entry.restart, main=entry.main
+                ManagedProcess(name, argv, self.sink, env), entry.restart, main=entry.main
             )
 
     def start_order(self) -> list[str]:
@@ -445,6 +451,7 @@ class Supervisor:
         if self.router is not None:
             self.router.proc.stop(timeout_s=5.0)
         self.sink.close()
+        shutil.rmtree(self._tmp, ignore_errors=True)
 
     def _install_signals(self) -> None:
         if threading.current_thread() is not threading.main_thread():
