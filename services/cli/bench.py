@@ -74,6 +74,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     f.add_argument("--fuzz-cases", type=int, default=500, help="fuzz cases per service")
     f.add_argument("--sim-seconds", type=float, default=6.0, help="sim seconds of each run")
+    f.add_argument(
+        "--no-harvest",
+        action="store_true",
+        help="skip the two harvest runs (detector, tracker, scene, planner killed / hung)",
+    )
     f.add_argument("--json", action="store_true", help="print one JSON object")
     f.set_defaults(func=cmd_bench_faults)
     bench_perception.add_parsers(bsub)
@@ -140,7 +145,9 @@ def cmd_bench_controller(args: argparse.Namespace) -> int:
 def cmd_bench_faults(args: argparse.Namespace) -> int:
     from services.supervisor.bench import run_faults_bench, table
 
-    result = run_faults_bench(args.fuzz_cases, args.sim_seconds, progress=not args.json)
+    result = run_faults_bench(
+        args.fuzz_cases, args.sim_seconds, progress=not args.json, harvest=not args.no_harvest
+    )
     print(json.dumps(result, indent=2) if args.json else table(result))
     ok = result["kills_survived"] == result["kills_tried"] and result["crashes"] == 0
     return 0 if ok else 1

@@ -25,6 +25,24 @@ KILLABLE = ("controller", "viz", "recorder")
 the router is killed once too (restarted by `router.restart`, clients re-dial it)."""
 FAST = "{policy: on-failure, max_restarts: 3, backoff_s: 0.05}"
 TICK_HZ = 120
+HARVEST_FAULTED = ("detector", "tracker", "scene", "planner")
+"""Killed (then, in a second run, hung) one after another during one real harvest."""
+LAB_TREE: dict[str, Any] = {
+    "name": "bench-faults-lab",
+    "seed": 3,
+    "tree": {
+        "trunk_xy_world_m": [1.15, 0.02],
+        "extra_branches": 1,
+        "leaf_clusters": 2,
+        "leaves_per_cluster": 4,
+    },
+    "fruits": [
+        {"position_world_m": [0.6, -0.12, 1.32], "radius_m": 0.04, "leaf_cover": "none"},
+        {"position_world_m": [0.7, 0.05, 1.25], "radius_m": 0.04, "leaf_cover": "none"},
+    ],
+}
+"""A small lab tree (few leaves: fast to render) with two reachable fruit: the harvest of
+tests/integration/test_faults_harvest.py."""
 
 
 def stack_yaml(d: Path, sim_s: float) -> str:
@@ -41,6 +59,27 @@ services:
   sim:
     main: true
     settings: {{scenario: paper-exp1, duration_s: {sim_s}}}
+"""
+
+
+def harvest_stack_yaml(d: Path, scenario: Path) -> str:
+    """The harvest of deploy/stack.yaml on the lab tree, every service restarted on failure."""
+    return f"""
+name: bench-faults-harvest
+mode: lockstep
+master: sim
+recording: {{enabled: true, dir: {d / "rec"}, restart: {FAST}}}
+services:
+  sim:
+    settings: {{scenario: {scenario}, seed: 5, duration_s: 90.0}}
+  detector: {{restart: {FAST}}}
+  tracker: {{restart: {FAST}}}
+  scene: {{restart: {FAST}}}
+  controller: {{restart: {FAST}}}
+  planner:
+    main: true
+    restart: {FAST}
+    settings: {{finish_after_s: 0.5}}
 """
 
 
@@ -121,6 +160,128 @@ def _fault_run(d: Path, name: str, sig: int, sim_s: float) -> dict[str, Any]:
         "liveliness_lost_s": t_down - t_fault,
         "back_live_s": t_up - t_fault,
         **lost,
+    }
+
+
+def harvest_fault_run(sig: int) -> dict[str, Any]:
+    """One supervised harvest of the lab tree; ``sig`` sent in turn to the detector, tracker
+    and scene (each after 20 more received messages) and to the planner (once the first fruit
+    is in the basket), each time waiting until the target is live again."""
+    d = Path(tempfile.mkdtemp(prefix="hvh-", dir="/tmp"))
+    try:
+        return _harvest_fault_run(d, sig)
+    finally:
+        shutil.rmtree(d, ignore_errors=True)
+
+
+def _harvest_fault_run(d: Path, sig: int) -> dict[str, Any]:
+    import yaml
+
+    from schemas import TOPICS
+    from services.recorder.inspect import iter_messages
+
+    scenario = d / "lab.yaml"
+    scenario.write_text(yaml.safe_dump(LAB_TREE))
+    (d / "stack.yaml").write_text(harvest_stack_yaml(d, scenario))
+    ep = f"unixsock-stream/{d}/router.sock"
+    run_id = "bench-harvest"
+    argv = [sys.executable, "-m", "services.cli", "run", "--stack", str(d / "stack.yaml")]
+    argv += ["--run-id", run_id, "--listen", ep, "--quiet"]
+    t0 = time.monotonic()
+    with open(d / "out.log", "wb") as log:
+        p = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+    health: list[tuple[float, str, bool]] = []
+    collected: list[int] = []
+    lock = threading.Lock()
+
+    def on_health(n: str, up: bool) -> None:
+        with lock:
+            health.append((time.monotonic(), n, up))
+
+    def on_event(_key: str, ev: Any) -> None:
+        if ev.event == "fruit_collected":
+            with lock:
+                collected.append(ev.fruit_id)
+
+    def bus() -> Bus | None:
+        try:
+            return Bus("bench-observer", BusSettings(connect=(ep,), namespace=f"harvest/{run_id}"))
+        except Exception:
+            return None
+
+    def after(name: str, up: bool, since: float) -> float | None:
+        with lock:
+            return next((t for t, n, u in health if n == name and u is up and t > since), None)
+
+    def running_received(name: str) -> int:
+        if p.poll() is not None:
+            raise RuntimeError(f"the run ended early (exit code {p.returncode})")
+        return _received(obs, name)
+
+    def fault_one(name: str) -> dict[str, Any]:
+        st = _wait(lambda: obs.query_status(name, 1.0), 120, f"status of {name}")
+        if name == "planner":
+            _wait(lambda: collected or p.poll() is not None, 300, "the first fruit")
+        else:
+            base = running_received(name)
+            _wait(lambda: running_received(name) >= base + 20, 180, f"{name} progress")
+        t_fault = time.monotonic()
+        os.kill(st[0].pid, sig)
+        t_down = _wait(lambda: after(name, False, t_fault), 30, f"{name}'s liveliness to go")
+        t_up = _wait(lambda: after(name, True, t_down), 60, f"{name} back")
+        return {
+            "service": name,
+            "signal": signal.Signals(sig).name,
+            "liveliness_lost_s": t_down - t_fault,
+            "back_live_s": t_up - t_fault,
+        }
+
+    rows: list[dict[str, Any]] = []
+    obs: Bus = _wait(bus, 60, "the run's router")
+    try:
+        obs.watch_health(on_health)
+        obs.subscribe("harvest/events", on_event)
+        for name in HARVEST_FAULTED:
+            rows.append(fault_one(name))
+    finally:
+        obs.close()
+    rc = p.wait(timeout=400)
+    wall_s = time.monotonic() - t0
+    run_log = d / "rec" / f"{run_id}.log"
+    out = run_log.read_text(errors="replace") if run_log.exists() else ""
+    states: set[int] = set()
+    answered: set[int | None] = set()
+    summary = None
+    cmd, summ = TOPICS["robot/command"].codec, TOPICS["harvest/summary"].codec
+    for m in iter_messages(d / "rec" / f"{run_id}.mcap"):
+        if m.topic == "robot/joint_state":
+            states.add(m.sequence)
+        elif m.topic == "robot/command":
+            answered.add(cmd.decode(m.payload).header.answers_seq)
+        elif m.topic == "harvest/summary":
+            summary = summ.decode(m.payload)
+    ticks = max(states) + 1 if states else 0
+    fruit = len(LAB_TREE["fruits"])
+    harvested = summary is not None and summary.harvested == summary.detected == fruit
+    no_collision = summary is not None and summary.collisions == 0
+    for r in rows:
+        r["restarted"] = f"restarting {r['service']}" in out
+        r["survived"] = rc == 0 and r["restarted"] and harvested and no_collision
+        r["joint_states_lost"] = ticks - len(states)  # in the whole run, every fault together
+        r["ticks_unanswered_in_recording"] = len(states - answered)
+    return {
+        "signal": signal.Signals(sig).name,
+        "exit_code": rc,
+        "wall_s": wall_s,
+        "ticks": ticks,
+        "joint_states_lost": ticks - len(states),
+        "ticks_unanswered": len(states - answered),
+        "detected": summary.detected if summary else None,
+        "harvested": summary.harvested if summary else None,
+        "collisions": summary.collisions if summary else None,
+        "sim_time_s": summary.sim_time_s if summary else None,
+        "planner_resumed": "resumed from" in out,
+        "faults": rows,
     }
 
 
@@ -260,9 +421,11 @@ def _try(fn: Callable[[], Any]) -> Any:
 
 
 def run_faults_bench(
-    fuzz_cases: int = 500, sim_s: float = 6.0, progress: bool = True
+    fuzz_cases: int = 500, sim_s: float = 6.0, progress: bool = True, harvest: bool = True
 ) -> dict[str, Any]:
-    """Kill and hang every restartable service once, fuzz every service, time the arm stop."""
+    """Kill and hang every restartable service once (controller, viz, recorder on a sim-only
+    run; detector, tracker, scene, planner during a real harvest), fuzz every service, time
+    the arm stop."""
     from services.testkit.fuzz_targets import fuzz_all
 
     def say(text: str) -> None:
@@ -276,6 +439,11 @@ def run_faults_bench(
             runs.append(fault_run(name, sig, sim_s))
     say("fault: SIGKILL router ...")
     router = fault_run("router", signal.SIGKILL, sim_s)
+    harvests = []
+    for sig in (signal.SIGKILL, signal.SIGSTOP) if harvest else ():
+        say(f"harvest: {signal.Signals(sig).name} of {', '.join(HARVEST_FAULTED)} in turn ...")
+        harvests.append(harvest_fault_run(sig))
+    runs += [r for h in harvests for r in h["faults"]]
     say(f"fuzz: {fuzz_cases} cases per service ...")
     fuzz = fuzz_all(fuzz_cases)
     outcomes = {k: v for k, v in fuzz.items() if not isinstance(v, str)}
@@ -291,8 +459,12 @@ def run_faults_bench(
         "restart_s_max": max(r["back_live_s"] for r in kills),
         "hang_detected_s_max": max(r["liveliness_lost_s"] for r in hangs),
         "hang_back_live_s_max": max(r["back_live_s"] for r in hangs),
-        "messages_lost_after_kill": sum(r["joint_states_lost"] for r in kills),
+        "messages_lost_after_kill": sum(
+            r["joint_states_lost"] for r in kills if r["service"] not in HARVEST_FAULTED
+        )
+        + sum(h["joint_states_lost"] for h in harvests if h["signal"] == "SIGKILL"),
         "lost_by_service": {r["service"]: r["joint_states_lost"] for r in kills},
+        "harvest_runs": [{k: v for k, v in h.items() if k != "faults"} for h in harvests],
         "recorder_lost_tail_s": next(
             r["recorder_lost_tail_s"] for r in kills if r["service"] == "recorder"
         ),
@@ -314,7 +486,10 @@ def run_faults_bench(
 
 
 def table(r: dict[str, Any]) -> str:
-    lines = [f"{k:32} {v}" for k, v in r.items() if k not in ("runs", "fuzz_per_service")]
+    skip = ("runs", "fuzz_per_service", "harvest_runs")
+    lines = [f"{k:32} {v}" for k, v in r.items() if k not in skip]
+    for h in r.get("harvest_runs", []):
+        lines.append(f"{'harvest run, ' + h['signal']:32} {h}")
     lines.append("")
     lines.append(f"{'service':12} {'signal':8} {'survived':9} {'lost s':>7} {'back s':>7} lost")
     for x in r["runs"]:
