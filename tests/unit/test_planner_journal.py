@@ -68,3 +68,27 @@ def test_without_a_state_dir_there_is_no_journal(monkeypatch: pytest.MonkeyPatch
     assert jr.journal_path() is None
     monkeypatch.setenv(jr.STATE_DIR_ENV, "/run/x")
     assert jr.journal_path() == Path("/run/x/planner.json")
+
+
+def test_a_cut_sent_before_the_restart_is_confirmed_by_the_basket(tmp_path: Path) -> None:
+    from schemas.base import Header
+    from schemas.robot import BasketState
+    from tests.contract.test_planner import status
+
+    b = book_with_two()
+    b.records[4].cuts = 1
+    path = tmp_path / "planner.json"
+    cut = {"key": 4, "fruit_id": 4, "stamp_ns": 5_000_000_000, "basket_before": 1}
+    jr.write(path, jr.dump(b, 0, cut))
+    core = PlannerCore(load_settings(Settings, {}), path)
+    basket = BasketState(header=Header(stamp_ns=0, seq=0, source="sim"), load_kg=0.4, fruit_count=2)
+    core.handle("robot/basket", basket)
+    out = core.handle("control/status", status(650, 0.0))
+    events = [m for t, m in out if t == "harvest/events"]
+    assert [(e.event, e.fruit_id) for e in events][:2] == [
+        ("phase_changed", 4),
+        ("fruit_collected", 4),
+    ]
+    assert "run_started" not in [e.event for e in events]
+    assert core.book.records[4].outcome == "harvested" and core.book.records[4].cuts == 1
+    assert jr.load(path, FruitBook(0.04, 0.015)) == (0, None)  # journaled: settled, no cut
