@@ -12,12 +12,13 @@ along the whole chain, while every consumer still drops the repeats by seq.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 import threading
 import time
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, Literal, Protocol
 
 from schemas.service import ServiceState, ServiceStatus
@@ -75,6 +76,18 @@ class SourceCore(Protocol):
     def emit(self) -> Sequence[Sequence[Output]]: ...
     def handle(self, topic: str, msg: Any) -> Sequence[Output]: ...
     def advance(self) -> None: ...
+
+
+def core_counters(core: Any) -> dict[str, int]:
+    """A core's ``counters`` for its status: a mapping (a Counter) or a dataclass of counts (the
+    controller's); anything else gives {} (a status query must never fail on it: the supervisor
+    asks for the status before judging a service hung)."""
+    c = getattr(core, "counters", None)
+    if dataclasses.is_dataclass(c) and not isinstance(c, type):
+        c = dataclasses.asdict(c)
+    if not isinstance(c, Mapping):
+        return {}
+    return {str(k): int(v) for k, v in sorted(c.items()) if isinstance(v, int)}
 
 
 class InputOrder:
@@ -169,7 +182,7 @@ class Node:
             topics={k: c.frozen() for k, c in sorted(self.bus.counters.items())},
             rejected_unknown=self.bus.rejected_unknown,
             errors=self.errors,
-            core_counters=dict(sorted(getattr(self._core, "counters", {}).items())),
+            core_counters=core_counters(self._core),
         )
 
     # ---- inputs ----------------------------------------------------------------------------

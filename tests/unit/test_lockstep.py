@@ -124,3 +124,22 @@ def test_barrier_gives_up_at_once_when_the_process_stops() -> None:
         b.wait(lambda: None, 10.0, 30.0, lambda m: str(m[0][0]) + f" @ {m[0][1]} ns", stop.is_set)
     assert time.monotonic() - t0 < 2.0
     assert b.missing() == []  # the abandoned group is forgotten
+
+
+def test_core_counters_of_a_mapping_a_dataclass_and_anything_else() -> None:
+    from collections import Counter
+
+    from services.controller.core import Counters
+    from services.runtime.node import core_counters
+
+    class Core:
+        counters: object = None
+
+    c = Core()
+    assert core_counters(c) == {}
+    c.counters = Counter({"b": 2, "a": 1})
+    assert core_counters(c) == {"a": 1, "b": 2}
+    c.counters = Counters(watchdog_stops=3)  # the controller's: its status query once failed
+    assert core_counters(c)["watchdog_stops"] == 3
+    c.counters = "nonsense"
+    assert core_counters(c) == {}
