@@ -281,6 +281,9 @@ def _harvest_fault_run(d: Path, sig: int) -> dict[str, Any]:
         "collisions": summary.collisions if summary else None,
         "sim_time_s": summary.sim_time_s if summary else None,
         "planner_resumed": "resumed from" in out,
+        "fruit_outcomes": [f"{f.fruit_id}: {f.outcome} {f.reason}".strip() for f in summary.fruits]
+        if summary
+        else [],
         "faults": rows,
     }
 
