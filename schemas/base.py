@@ -28,15 +28,23 @@ class Frozen(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
 
+INT64_MAX = 2**63 - 1
+"""Largest stamp or seq: MCAP and Rerun store them as 64-bit integers (a larger one, valid
+before, crashed the recorder's writer; found by the fuzz)."""
+
+
 class Header(Frozen):
     """Common header of every message: logical time, sequence, frame and source."""
 
     stamp_ns: int = Field(
         ge=0,
+        le=INT64_MAX,
         description="When the data is valid, ns (sim or sensor time; never the receive time). "
         "An answer copies the stamp of the input it answers.",
     )
-    seq: int = Field(ge=0, description="Per-publisher, per-topic counter, starting at 0.")
+    seq: int = Field(
+        ge=0, le=INT64_MAX, description="Per-publisher, per-topic counter, starting at 0."
+    )
     frame_id: str = Field(
         default="", description="Coordinate frame of the spatial data ('' when there is none)."
     )
@@ -44,6 +52,7 @@ class Header(Frozen):
     answers_seq: int | None = Field(
         default=None,
         ge=0,
+        le=INT64_MAX,
         description="seq of the input message this message answers (None for source data).",
     )
 

@@ -17,7 +17,7 @@ import zenoh
 from schemas.codec import DecodeError
 from schemas.service import ServiceStatus, TopicCounters
 from schemas.topics import Topic, topic
-from services.bus.config import BusSettings, make_zenoh_config
+from services.bus.config import BusSettings, TlsError, make_zenoh_config
 
 log = logging.getLogger("bus")
 
@@ -103,7 +103,9 @@ class Bus:
         self._reject_log = _RejectLog()
         self._handles: list[Any] = []  # keep every declared entity alive
         try:
-            self.session = zenoh.open(make_zenoh_config(settings))
+            self.session = zenoh.open(make_zenoh_config(settings, identity=name))
+        except TlsError as exc:
+            raise BusError(str(exc)) from None
         except zenoh.ZError as exc:
             raise BusError(_explain_open_error(settings, exc)) from None
 
@@ -200,11 +202,28 @@ class Bus:
         sub = self.session.liveliness().declare_subscriber(f"{HEALTH_PREFIX}/*", cb, history=True)
         self._handles.append(sub)
 
+    def declare_token(self, key: str) -> None:
+        """A liveliness token on ``key`` (relative to the namespace), held until close."""
+        self._handles.append(self.session.liveliness().declare_token(key))
+
+    def watch_token(self, key: str, on_change: Callable[[bool], None]) -> None:
+        """``on_change(present)`` whenever the liveliness token ``key`` appears or vanishes."""
+
+        def cb(sample: zenoh.Sample) -> None:
+            on_change(sample.kind == zenoh.SampleKind.PUT)
+
+        sub = self.session.liveliness().declare_subscriber(key, cb, history=True)
+        self._handles.append(sub)
+
     def live_services(self, timeout_s: float = 1.0) -> list[str]:
         """Names of the services whose health token is present now."""
         replies = self.session.liveliness().get(f"{HEALTH_PREFIX}/*", timeout=timeout_s)
         names = {str(r.ok.key_expr).rsplit("/", 1)[-1] for r in replies if r.ok is not None}
         return sorted(names)
+
+    def router_connected(self) -> bool:
+        """Whether this session has a link to a router now (False while one restarts)."""
+        return bool(self.session.info.routers_zid())
 
     def discover_namespaces(self, timeout_s: float = 1.0) -> list[str]:
         """Namespaces with live services, seen from a session opened without a namespace."""
@@ -267,9 +286,15 @@ def _explain_open_error(s: BusSettings, exc: Exception) -> str:
             f"(another run or router? choose another endpoint with --listen)"
         )
     if s.mode == "client":
+        tls = (
+            f"; with TLS ({s.tls_dir}), also check that the router uses the same CA and "
+            f"accepts this certificate"
+            if s.tls_dir
+            else ""
+        )
         return (
             f"cannot connect to {', '.join(s.connect)}: is the router running? "
-            f"(start one with `harvest router` or `harvest run`) ({text})"
+            f"(start one with `harvest run`){tls} ({text})"
         )
     return (
         f"cannot open a Zenoh session ({s.mode}, connect={list(s.connect)}, "

@@ -1,4 +1,5 @@
-"""`harvest bench ...`: benchmarks (bus, viz, sim, controller, detector, tracker, harvest)."""
+"""`harvest bench ...`: benchmarks (bus, viz, sim, controller, detector, tracker, harvest,
+faults)."""
 
 from __future__ import annotations
 
@@ -62,6 +63,24 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--seed", type=int, default=6, help="seed of the scenes and the targets")
     c.add_argument("--json", action="store_true", help="print one JSON object")
     c.set_defaults(func=cmd_bench_controller)
+    f = bsub.add_parser(
+        "faults",
+        help="faults: kills and hangs survived, fuzz crashes, restart and arm-stop times",
+        description="SIGKILL and SIGSTOP each restartable service (controller, viz, recorder) "
+        "of a supervised lock-step sim run, once each: survived, liveliness lost and back, "
+        "joint-state ticks lost, the recorder's lost tail after `harvest recover`; fuzz cases "
+        "per registered service (seeded) and crashes; the live controller's time from its last "
+        "joint state to a zero-velocity command.",
+    )
+    f.add_argument("--fuzz-cases", type=int, default=500, help="fuzz cases per service")
+    f.add_argument("--sim-seconds", type=float, default=6.0, help="sim seconds of each run")
+    f.add_argument(
+        "--no-harvest",
+        action="store_true",
+        help="skip the two harvest runs (detector, tracker, scene, planner killed / hung)",
+    )
+    f.add_argument("--json", action="store_true", help="print one JSON object")
+    f.set_defaults(func=cmd_bench_faults)
     bench_perception.add_parsers(bsub)
     h = bsub.add_parser(
         "harvest",
@@ -121,6 +140,17 @@ def cmd_bench_controller(args: argparse.Namespace) -> int:
     result = run_controller_bench(args.ticks, args.targets, args.seed, progress=not args.json)
     print(json.dumps(result, indent=2) if args.json else table(result))
     return 0
+
+
+def cmd_bench_faults(args: argparse.Namespace) -> int:
+    from services.supervisor.bench import run_faults_bench, table
+
+    result = run_faults_bench(
+        args.fuzz_cases, args.sim_seconds, progress=not args.json, harvest=not args.no_harvest
+    )
+    print(json.dumps(result, indent=2) if args.json else table(result))
+    ok = result["kills_survived"] == result["kills_tried"] and result["crashes"] == 0
+    return 0 if ok else 1
 
 
 def cmd_bench_harvest(args: argparse.Namespace) -> int:

@@ -62,6 +62,8 @@ def open_run_bus(args: argparse.Namespace, name: str) -> Bus:
     """A client session in the run's namespace; the namespace is discovered when unique."""
     if args.run:
         args.namespace = f"harvest/{args.run}"
+    if args.tls_dir and not args.tls_identity:
+        args.tls_identity = "operator"  # people's tools present the operator certificate
     if not args.namespace:
         with Bus(name, bus_settings_from_args(args)) as probe:
             found = probe.discover_namespaces()

@@ -6,7 +6,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from services.cli import bench, dataset, evaluate, files, live, replay, run, train, view
+from services.cli import bench, certs, dataset, evaluate, files, live, replay, run, train, view
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -20,6 +20,7 @@ def build_parser() -> argparse.ArgumentParser:
     view.add_parser(sub)
     bench.add_parser(sub)
     dataset.add_parsers(sub)
+    certs.add_parsers(sub)
     train.add_parsers(sub)
     evaluate.add_parsers(sub)
     return ap

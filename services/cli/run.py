@@ -44,6 +44,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--run-id", help="run id (default run-<date>-<time>-<random>)")
     p.add_argument("--listen", help="router endpoint (overrides the stack's router.listen)")
+    p.add_argument(
+        "--host",
+        help="multi-host stacks: run only this host's router, recorder and services "
+        "(deploy/multihost/README.md)",
+    )
+    p.add_argument(
+        "--connect",
+        action="append",
+        metavar="ENDPOINT",
+        help="where this host reaches the router (overrides router.connect; repeatable)",
+    )
     p.add_argument("--no-record", action="store_true", help="do not record an MCAP")
     p.add_argument("--quiet", action="store_true", help="no service logs on the terminal")
     p.add_argument(
@@ -91,14 +102,29 @@ def cmd_run(args: argparse.Namespace) -> int:
     updates: dict[str, object] = {}
     if args.no_record:
         updates["recording"] = stack.recording.model_copy(update={"enabled": False})
+    router_updates: dict[str, object] = {}
     if args.listen:
-        updates["router"] = stack.router.model_copy(update={"listen": (args.listen,)})
+        router_updates["listen"] = (args.listen,)
+    if args.connect:
+        router_updates["connect"] = tuple(args.connect)
+    if router_updates:
+        updates["router"] = stack.router.model_copy(update=router_updates)
+    if args.host:
+        updates["host"] = args.host
     if args.view or args.save:
         updates["services"] = with_viz(stack, args.view, args.save, args.viz_port)
     if updates:
         stack = stack.model_copy(update=updates)
     stack = label_planner(stack)
-    sup = Supervisor(stack, args.stack, args.run_id or new_run_id(), args.profile, quiet=args.quiet)
+    try:
+        sup = Supervisor(
+            stack, args.stack, args.run_id or new_run_id(), args.profile, quiet=args.quiet
+        )
+    except OSError as exc:  # e.g. the recording folder is not writable: nothing started yet
+        con.print(
+            f"[red]refused to start:[/] cannot write the run log in {stack.recording.dir}: {exc}"
+        )
+        return 2
     watch = None
     if "planner" in stack.enabled():
         from services.cli.harvest_view import HarvestWatch
@@ -151,29 +177,43 @@ def print_summary(console: Console, r: RunResult) -> None:
     t = Table(title=f"run {r.run_id}", show_header=True)
     t.add_column("service")
     t.add_column("restarts", justify="right")
+    t.add_column("back live after, s", justify="right")
     t.add_column("exit codes")
     for name, c in r.children.items():
-        t.add_row(name, str(c.restarts), ",".join(map(str, c.proc.exit_codes)) or "-")
+        back = ", ".join(f"{x:.2f}" for x in c.restart_s) or "-"
+        t.add_row(name, str(c.restarts), back, ",".join(map(str, c.proc.exit_codes)) or "-")
     console.print(t)
-    if r.mcap is not None:
-        try:
-            info = read_info(r.mcap)
-            tt = Table(title=f"recording {r.mcap}")
-            tt.add_column("topic")
-            tt.add_column("messages", justify="right")
-            for ch in info.channels:
-                tt.add_row(ch.topic, str(ch.count))
-            console.print(tt)
-            console.print(
-                f"recorded {info.message_count} messages, "
-                f"{info.duration_s:.2f} s of stamps, {info.size_bytes / 1e6:.1f} MB"
-            )
-        except RecordingError as exc:
-            console.print(f"[yellow]recording:[/] {exc}")
+    for i, part in enumerate(r.mcap_parts or ([r.mcap] if r.mcap else [])):
+        _print_recording(console, part, table=i == 0)
     console.print(f"wall time {r.wall_s:.1f} s; log {r.log}")
+    for w in r.warnings:
+        console.print(f"[yellow]warning:[/] {w}")
     if r.exit_code == 0:
         console.print("[green]run finished[/]")
     elif r.exit_code == 130:
         console.print("[yellow]run interrupted; recording finished cleanly[/]")
     else:
         console.print(f"[red]run failed:[/] {r.failure}")
+
+
+def _print_recording(console: Console, path: Path, table: bool) -> None:
+    """Counts of one recording file; a file cut by a crash says how to repair it."""
+    if not path.exists():
+        console.print(f"[yellow]recording:[/] {path} was not written")
+        return
+    try:
+        info = read_info(path)
+    except RecordingError as exc:
+        console.print(f"[yellow]recording:[/] {exc}")
+        return
+    if table:
+        tt = Table(title=f"recording {path}")
+        tt.add_column("topic")
+        tt.add_column("messages", justify="right")
+        for ch in info.channels:
+            tt.add_row(ch.topic, str(ch.count))
+        console.print(tt)
+    console.print(
+        f"{path}: {info.message_count} messages, "
+        f"{info.duration_s:.2f} s of stamps, {info.size_bytes / 1e6:.1f} MB"
+    )

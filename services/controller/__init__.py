@@ -111,6 +111,12 @@ class Settings(ServiceSettings):
     max_obstacle_size_m: float = Field(
         default=2.0, gt=0, description="Larger radius / semi-axis: the scene is refused, m."
     )
+    max_obstacles: int = Field(
+        default=500,
+        gt=0,
+        description="More obstacles than this: the scene is refused (and counted). The tick's "
+        "cost grows with the count; a 10,000-obstacle scene took over a minute per tick.",
+    )
     # --- workspace (targets outside are refused) -------------------------------------------
     workspace_min_world_m: tuple[float, float, float] = Field(
         default=(-0.2, -1.2, 0.3), description="Lower corner of the cutter target box, world, m."

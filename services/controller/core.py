@@ -155,6 +155,11 @@ class ControllerCore:
 
     def _on_scene(self, msg: SceneState) -> None:
         try:
+            n = len(msg.obstacles.cylinders) + len(msg.obstacles.ellipsoids)
+            if n > self.s.max_obstacles:
+                raise ObstacleError(
+                    f"{n} obstacles, more than max_obstacles {self.s.max_obstacles}"
+                )
             check_obstacles(msg.obstacles, self.s.min_obstacle_size_m, self.s.max_obstacle_size_m)
         except ObstacleError as exc:
             self.counters.rejected_scenes += 1

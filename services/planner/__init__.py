@@ -241,8 +241,9 @@ SPEC = NodeSpec(
 
 def _make_core(settings: Settings):
     from services.planner.core import PlannerCore
+    from services.planner.journal import journal_path
 
-    return PlannerCore(settings)
+    return PlannerCore(settings, journal_path())
 
 
 SERVICE = ServiceDef(

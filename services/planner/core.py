@@ -6,6 +6,7 @@ every output is a function of the inputs (the IK is deterministic and cached per
 from __future__ import annotations
 
 import logging
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -14,10 +15,10 @@ from schemas.control import ControlStatus
 from schemas.harvest import HarvestEvent
 from schemas.robot import BasketState, JointState, ToolCommand
 from schemas.scene import Fruit, SceneState
-from services.planner import Settings
+from services.planner import Settings, journal
 from services.planner.book import FruitBook, inside_dish
 from services.planner.kinematics import Kinematics
-from services.planner.machine import Goal, Machine
+from services.planner.machine import CutState, Goal, Machine
 from services.planner.poses import PoseSettings, plan_target
 from services.planner.summary import run_summary
 from services.runtime import Output, Stamper
@@ -31,7 +32,7 @@ IN_DISH_MARGIN_M = 0.02
 class PlannerCore:
     """See the package README for inputs, outputs, settings and the state machine."""
 
-    def __init__(self, settings: Settings) -> None:
+    def __init__(self, settings: Settings, journal_path: Path | None = None) -> None:
         s = self.s = settings
         self.kin = Kinematics(
             s.reach_yaws_deg, s.reach_iterations, s.reach_tolerance_m, s.ready_pose
@@ -58,6 +59,30 @@ class PlannerCore:
         self._in_contact = False
         self.summary_sent = False
         self.refused: dict[str, int] = {}
+        self.journal_path = journal_path  # services/planner/journal.py: survives a restart
+        self._journaled = ""
+        self._resume_cut: dict[str, int] | None = None
+        if journal_path is not None:
+            self._resume(journal_path)
+
+    def _resume(self, path: Path) -> None:
+        """A restarted planner (under the supervisor): take the journal its predecessor left."""
+        got = journal.load(path, self.book)
+        if got is None:
+            return
+        self.contacts, self._resume_cut = got
+        self.machine.started = True  # the run started before the restart: no second event
+        settled = sum(r.finished for r in self.book.records.values())
+        log.warning(
+            "resumed from %s: %d fruit known, %d settled, %d contacts%s",
+            path,
+            len(self.book.records),
+            settled,
+            self.contacts,
+            f", cut of fruit {self._resume_cut['fruit_id']} awaiting confirmation"
+            if self._resume_cut
+            else "",
+        )
 
     # ---- inputs ------------------------------------------------------------------------------
     def handle(self, topic: str, msg: Any) -> list[Output]:
@@ -116,8 +141,12 @@ class PlannerCore:
         if self.pending_scene is not None:
             self.book.update(self.pending_scene, self._in_dish)
             self.pending_scene = None
+        contacts = self.contacts
         self._count_contacts(st)
         m = self.machine
+        if self._resume_cut is not None:
+            self._take_cut(now, self._resume_cut)
+            self._resume_cut = None
         goal = m.step(now, st, self.targets_sent, self.basket_count)
         out: list[Output] = []
         for action, fruit_id in m.tools:
@@ -147,6 +176,8 @@ class PlannerCore:
                     ),
                 )
             )
+        if m.events or self.contacts != contacts:
+            self._journal()
         m.tools.clear()
         m.events.clear()
         if m.finished and not self.summary_sent:
@@ -161,6 +192,35 @@ class PlannerCore:
             self.summary_sent = True
         out.append(("plan/target", self._target(st, goal)))
         return out
+
+    def _journal(self) -> None:
+        if self.journal_path is None:
+            return
+        m = self.machine
+        cut = None
+        if m.phase == "cut" and m.cut is not None and m.target is not None:
+            cut = {
+                "key": m.target.key,
+                "fruit_id": m.target.fruit_id,
+                "stamp_ns": m.cut.stamp_ns,
+                "basket_before": m.cut.basket_before,
+            }
+        text = journal.dump(self.book, self.contacts, cut)
+        if text != self._journaled:
+            try:
+                journal.write(self.journal_path, text)
+                self._journaled = text
+            except OSError as exc:
+                self._refuse("journal", f"cannot write {self.journal_path}: {exc}")
+
+    def _take_cut(self, now: int, cut: dict[str, int]) -> None:
+        """Resume the wait for a cut sent before the restart (the shears are closed, the fruit
+        may be falling): the machine is in the cut phase of that fruit again."""
+        rec = self.book.records.get(cut["key"])
+        if rec is None or rec.finished:
+            return
+        state = CutState(cut["stamp_ns"], cut["basket_before"], rec.planned.centre_world_m.copy())
+        self.machine.resume_cut(rec, state, now, self.targets_sent)
 
     def _target(self, st: ControlStatus, goal: Goal) -> Any:
         self.targets_sent += 1

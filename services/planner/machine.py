@@ -425,6 +425,16 @@ class Machine:
         rec.finished_ns = now  # never attempted
         return False
 
+    def resume_cut(self, rec: FruitRecord, cut: CutState, now: int, next_seq: int) -> None:
+        """A restarted planner (journal.py): the cut of ``rec`` sent before the restart is
+        awaited again, from the original cut's stamp and basket count."""
+        self.next_seq = next_seq
+        self.target = rec
+        rec.frozen = True
+        rec.attempt_ns = now
+        self.cut = cut
+        self._enter("cut", now)
+
     # ---- helpers -----------------------------------------------------------------------------
     def _enter(self, phase: HarvestPhase, now: int) -> None:
         rec = self.target

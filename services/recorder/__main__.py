@@ -2,11 +2,16 @@
 
 Writes every sample of the namespace to one MCAP (see writer.py). Finishes the file on
 SIGTERM/SIGINT; a SIGKILLed file can be repaired with `harvest recover`.
+
+Exit codes: 0 finished, 1 bus, 2 bad settings or the file cannot be created, 3 the file could
+not be written any more (disk full, I/O error): the file is valid up to its last flushed chunk
+after `harvest recover`.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import ctypes
 import json
 import logging
@@ -34,19 +39,40 @@ class Recorder:
     """Queue fed by Zenoh callbacks, drained by one writer thread (the MCAP writer is not
     thread-safe, and the callbacks must stay short)."""
 
-    def __init__(self, bus: Bus, writer: RunWriter, settings: Settings, chash: str) -> None:
-        self.bus, self.writer, self.s, self.chash = bus, writer, settings, chash
+    def __init__(
+        self, bus: Bus, writer: RunWriter, settings: Settings, chash: str, out: Path
+    ) -> None:
+        self.bus, self.writer, self.s, self.chash, self.out = bus, writer, settings, chash, out
         self.q: queue.SimpleQueue[RawSample | None] = queue.SimpleQueue()
         self.state: ServiceState = "starting"
         self.errors = 0
+        self.failure = ""  # set when the file cannot be written any more
+        self.failed = threading.Event()
+        self.written = 0
+        self.last_stamp_recv_ns = 0
         self._logged_unknown: set[str] = set()
 
     def on_sample(self, sample: RawSample) -> None:
         self.bus.counters_for(sample.key).received += 1
-        self.q.put(sample)
+        if not self.failed.is_set():  # a failed recorder keeps nothing in memory
+            self.q.put(sample)
 
     def run(self) -> None:
-        """Writer loop; returns after a None sentinel, with the file finished."""
+        """Writer loop; returns after a None sentinel with the file finished, or at once when
+        the file cannot be written (``failure`` says why; the process then exits 3)."""
+        try:
+            self._loop()
+            self.writer.finish()
+        except OSError as exc:
+            self.state = "failed"
+            self.failure = (
+                f"cannot write {self.out}: {exc.strerror or exc} (errno {exc.errno}); "
+                f"{self.written} messages were recorded, up to the last flush; "
+                f"`harvest recover {self.out}` makes the file valid"
+            )
+            self.failed.set()
+
+    def _loop(self) -> None:
         last_flush = time.monotonic()
         while True:
             try:
@@ -55,15 +81,22 @@ class Recorder:
                 pass  # idle: still flush on time below
             else:
                 if item is None:
-                    break
+                    return
                 self._write(item)
+                self.written += 1
             if time.monotonic() - last_flush >= self.s.flush_interval_s:
                 self.writer.flush()
                 last_flush = time.monotonic()
-        self.writer.finish()
 
     def _write(self, s: RawSample) -> None:
-        result = self.writer.write(s.key, s.payload, s.encoding, s.recv_ns)
+        try:
+            result = self.writer.write(s.key, s.payload, s.encoding, s.recv_ns)
+        except OSError:
+            raise  # the file cannot be written any more: run() ends the recorder (exit 3)
+        except Exception as exc:  # one sample the writer cannot take must not stop the rest
+            self.errors += 1
+            self.bus.reject(s.key, f"cannot record: {type(exc).__name__}: {exc}")
+            return
         if result == "rejected":
             self.bus.reject(s.key, "payload does not decode; recorded under _rejected/")
         elif result == "unknown":
@@ -132,32 +165,53 @@ def main(argv: list[str] | None = None) -> int:
         if settings.preview == "none"
         else CameraPreview(settings.preview, settings.preview_scale, settings.preview_jpeg_quality)
     )
-    writer = RunWriter(
-        stream, settings.compression, settings.chunk_size_bytes, settings.lz4_level, preview
-    )
-    if meta:
-        writer.add_metadata(RUN_METADATA, meta)
+    try:
+        writer = RunWriter(
+            stream, settings.compression, settings.chunk_size_bytes, settings.lz4_level, preview
+        )
+        if meta:
+            writer.add_metadata(RUN_METADATA, meta)
+        stream.flush()  # a full disk shows here, before we say we record
+    except OSError as exc:
+        print(f"recorder: cannot write {out}: {exc.strerror or exc}", file=sys.stderr)
+        return 3
     try:
         bus = Bus("recorder", bus_settings_from_args(args))
     except BusError as exc:
         log.error("%s", exc)
         return 1
-    rec = Recorder(bus, writer, settings, config_hash(settings))
+    rec = Recorder(bus, writer, settings, config_hash(settings), out)
     bus.subscribe_raw(settings.keyexpr, rec.on_sample)
     bus.serve_status(rec.status)
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
-    worker = threading.Thread(target=rec.run, name="mcap-writer")
+
+    def write_until_done() -> None:
+        rec.run()
+        stop.set()  # after a write failure: end the process at once (exit 3)
+
+    worker = threading.Thread(target=write_until_done, name="mcap-writer")
     worker.start()
     rec.state = "running"
     bus.declare_health()
     log.info("recording to %s", out)
     stop.wait()
+    if rec.failed.is_set():
+        log.error("%s", rec.failure)
+        bus.close()
+        with contextlib.suppress(OSError):  # the buffered tail cannot be written either
+            stream.close()
+        return 3
     rec.state = "stopping"
     bus.close()  # no more samples after this
     rec.q.put(None)
     worker.join()
+    if rec.failed.is_set():
+        log.error("%s", rec.failure)
+        with contextlib.suppress(OSError):
+            stream.close()
+        return 3
     stream.close()
     n = sum(st.messages for st in writer.stats.values())
     log.info("finished %s: %d messages on %d channels", out, n, len(writer.stats))

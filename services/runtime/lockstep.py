@@ -27,6 +27,13 @@ class LockstepPlan(BaseModel):
     consumers: tuple[str, ...] = Field(default=(), description="Services live before tick 0.")
     resend_after_s: float = Field(default=2.0, gt=0, description="Re-publish a stalled group.")
     stall_timeout_s: float = Field(default=60.0, gt=0, description="Give up after this, s.")
+    consumer_wait_s: float = Field(
+        default=5.0,
+        ge=0,
+        description="A consumer that lost its liveliness mid-run (killed, restarting) pauses the "
+        "clock this long at most, so nothing is published it would miss; then the run goes on "
+        "without it until it is back (0: never pause), s.",
+    )
 
 
 class LockstepStall(RuntimeError):
@@ -44,6 +51,7 @@ class AnswerBarrier:
         self.wait_map = {k: tuple(v) for k, v in wait.items()}
         self._expected: Counter[tuple[str, int]] = Counter()
         self._received: Counter[tuple[str, int]] = Counter()
+        self._seen: set[tuple[str, int, int]] = set()  # (topic, stamp, seq) already counted
         self._cv = threading.Condition()
         self.stalls = 0
 
@@ -58,9 +66,15 @@ class AnswerBarrier:
             for t in self.wait_map.get(topic, ()):
                 self._expected[(t, stamp_ns)] += 1
 
-    def note(self, topic: str, stamp_ns: int) -> None:
-        """Called for every received message on a barrier topic."""
+    def note(self, topic: str, stamp_ns: int, seq: int | None = None) -> None:
+        """Called for every received message on a barrier topic. With ``seq``, a repeat of a
+        message already counted (a re-published answer after a re-send) is not counted again."""
         with self._cv:
+            if seq is not None:
+                key = (topic, stamp_ns, seq)
+                if key in self._seen:
+                    return
+                self._seen.add(key)
             self._received[(topic, stamp_ns)] += 1
             self._cv.notify_all()
 
@@ -110,4 +124,6 @@ class AnswerBarrier:
             newest = max((s for _, s in self._expected), default=-1)
             for k in [k for k in self._received if k[1] <= newest]:
                 del self._received[k]
+            # Keep the newest stamp's seen answers: a late repeat of one must still be ignored.
+            self._seen = {k for k in self._seen if k[1] >= newest}
             self._expected.clear()

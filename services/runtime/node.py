@@ -3,16 +3,22 @@
 Every input is decoded on a Zenoh thread, checked for order, queued, and handed to the core on
 one worker thread in arrival order. With all services as clients of one router, arrival order
 is causal order, which is what makes lock-step runs byte-identical.
+
+In lock-step a service answers a repeat of the input it answered last (the master re-sends a
+stalled tick) by publishing its answer again, byte for byte, without calling the core: a
+message lost between two services (a killed service, a restarted router) is then replaced
+along the whole chain, while every consumer still drops the repeats by seq.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 import threading
 import time
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, Literal, Protocol
 
 from schemas.service import ServiceState, ServiceStatus
@@ -25,6 +31,7 @@ log = logging.getLogger("node")
 
 Output = tuple[str, Any]
 Mode = Literal["lockstep", "live"]
+_REANSWER = "\x00reanswer"  # queue marker: publish the cached answer to (topic, seq) again
 
 
 class Core(Protocol):
@@ -71,6 +78,18 @@ class SourceCore(Protocol):
     def advance(self) -> None: ...
 
 
+def core_counters(core: Any) -> dict[str, int]:
+    """A core's ``counters`` for its status: a mapping (a Counter) or a dataclass of counts (the
+    controller's); anything else gives {} (a status query must never fail on it: the supervisor
+    asks for the status before judging a service hung)."""
+    c = getattr(core, "counters", None)
+    if dataclasses.is_dataclass(c) and not isinstance(c, type):
+        c = dataclasses.asdict(c)
+    if not isinstance(c, Mapping):
+        return {}
+    return {str(k): int(v) for k, v in sorted(c.items()) if isinstance(v, int)}
+
+
 class InputOrder:
     """Per-topic order check: drop duplicated or out-of-order messages and stamps that go back.
 
@@ -80,6 +99,10 @@ class InputOrder:
 
     def __init__(self) -> None:
         self.last: dict[str, tuple[int, int]] = {}
+
+    def repeat(self, topic: str, seq: int, stamp_ns: int) -> bool:
+        """True for an exact repeat of the last accepted message (same seq and stamp)."""
+        return self.last.get(topic) == (seq, stamp_ns)
 
     def check(self, topic: str, seq: int, stamp_ns: int) -> str | None:
         prev = self.last.get(topic)
@@ -117,6 +140,10 @@ class Node:
         self._queue: deque[Output] = deque()
         self._cv = threading.Condition()
         self._order = InputOrder()
+        self._answered: dict[str, tuple[int, Sequence[Output]]] = {}  # topic → (seq, outputs)
+        self._live: set[str] = set()  # consumers whose liveliness is present (clock master)
+        self._given_up: set[str] = set()  # consumers left behind after consumer_wait_s
+        self._health_cv = threading.Condition()
         self._error_log: set[str] = set()
         self._core: Any = None  # set by the run loop; its ``counters`` (if any) go into status
         self.barrier = AnswerBarrier(self.plan.wait) if mode == "lockstep" else None
@@ -155,7 +182,7 @@ class Node:
             topics={k: c.frozen() for k, c in sorted(self.bus.counters.items())},
             rejected_unknown=self.bus.rejected_unknown,
             errors=self.errors,
-            core_counters=dict(sorted(getattr(self._core, "counters", {}).items())),
+            core_counters=core_counters(self._core),
         )
 
     # ---- inputs ----------------------------------------------------------------------------
@@ -164,16 +191,25 @@ class Node:
         is_input = topic in self.spec.inputs
         with self._cv:
             if is_input:
+                repeat = self._order.repeat(topic, header.seq, header.stamp_ns)
                 problem = self._order.check(topic, header.seq, header.stamp_ns)
                 if problem:
                     self.bus.reject(topic, problem)
+                    if repeat and self._reanswers(topic):
+                        self._queue.append((_REANSWER, (topic, header.seq)))
+                        self._cv.notify_all()
                     return
                 if self.mode == "live" and topic in self.spec.conflate:
                     self._drop_pending(topic)
                 self._queue.append((topic, msg))
                 self._cv.notify_all()
         if self.barrier is not None:
-            self.barrier.note(topic, header.stamp_ns)
+            self.barrier.note(topic, header.stamp_ns, header.seq)
+
+    def _reanswers(self, topic: str) -> bool:
+        """Answers to ``topic`` are re-published on a repeat: lock-step, not the clock master
+        (it has its own re-send), and ``topic`` has declared answers."""
+        return self.mode == "lockstep" and not self.plan.wait and topic in self.spec.answers
 
     def _drop_pending(self, topic: str) -> None:
         kept = [item for item in self._queue if item[0] != topic]
@@ -230,7 +266,7 @@ class Node:
             wait_s = 0.2 if timer is None else min(0.2, max(0.0, next_due - time.monotonic()))
             item = self.next_input(timeout_s=wait_s)
             if item is not None:
-                self.publish(self.call(core.handle, *item))
+                self._handle(core, *item)
                 if done is not None and done():
                     log.info("core finished: stopping")
                     self.stop_event.set()
@@ -240,6 +276,20 @@ class Node:
                 # Fixed phase, but never a burst of catch-up calls after a long input.
                 next_due = max(next_due + period_s, time.monotonic())
                 self.publish(self._call_timer(fn))
+
+    def _handle(self, core: Core, topic: str, msg: Any) -> None:
+        """One input: the core's outputs are published (and kept, to answer a repeat)."""
+        if topic == _REANSWER:
+            key, seq = msg
+            done = self._answered.get(key)
+            if done is not None and done[0] == seq:
+                log.info("%s seq %d came again (re-sent tick): answer published again", key, seq)
+                self.publish(done[1])
+            return
+        outputs = self.call(core.handle, topic, msg)
+        self.publish(outputs)
+        if self._reanswers(topic):
+            self._answered[topic] = (msg.header.seq, outputs)
 
     def _call_timer(self, fn: Any) -> Sequence[Output]:
         """Run the core's timer; an exception is counted and logged once, never fatal."""
@@ -258,8 +308,11 @@ class Node:
         In live mode nothing is awaited and sim time is paced by the wall clock × ``speed``.
         """
         self._await_consumers()
+        if self.barrier is not None and self.plan.consumers and self.plan.consumer_wait_s > 0:
+            self.bus.watch_health(self._on_consumer_health)
         wall0, sim0 = time.monotonic(), core.now_ns()
         while not self.stop_event.is_set() and not core.done():
+            self._pause_for_consumers()
             try:
                 for group in core.emit():
                     self._publish_group(group)
@@ -315,6 +368,43 @@ class Node:
     def _feed(self, core: SourceCore) -> None:
         for topic, msg in self.drain():
             self.publish(self.call(core.handle, topic, msg))
+
+    def _on_consumer_health(self, name: str, alive: bool) -> None:
+        with self._health_cv:
+            if alive:
+                self._live.add(name)
+                self._given_up.discard(name)
+            else:
+                self._live.discard(name)
+            self._health_cv.notify_all()
+
+    def _pause_for_consumers(self) -> None:
+        """Lock-step, between ticks: while a consumer is down (a restart takes about a second)
+        publish nothing it would miss, so a restarted recorder loses only its unflushed tail.
+        One that stays down longer than ``consumer_wait_s`` (failed for good) is left behind."""
+        if self.barrier is None or self.plan.consumer_wait_s <= 0:
+            return
+        with self._health_cv:
+            missing = [c for c in self.plan.consumers if c not in self._live | self._given_up]
+            if not missing:
+                return
+            log.warning("lock-step: paused, waiting for %s to be live again", ", ".join(missing))
+            deadline = time.monotonic() + self.plan.consumer_wait_s
+            while not self.stop_event.is_set():
+                missing = [c for c in missing if c not in self._live]
+                left = deadline - time.monotonic()
+                if not missing or left <= 0:
+                    break
+                self._health_cv.wait(min(left, 0.05))
+            if missing:
+                self._given_up.update(missing)
+                log.warning(
+                    "lock-step: going on without %s (not live after %.1f s)",
+                    ", ".join(missing),
+                    self.plan.consumer_wait_s,
+                )
+            else:
+                log.info("lock-step: every consumer is live again, resuming")
 
     def _await_consumers(self, timeout_s: float = 60.0) -> None:
         """Before tick 0: every declared consumer must be live (its subscriptions are up)."""

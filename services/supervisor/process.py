@@ -23,6 +23,7 @@ class LogSink:
         self._lock = threading.Lock()
         self._colour: dict[str, int] = {}
         self._tty = sys.stdout.isatty()
+        self.path = file
         self._file: IO[str] | None = open(file, "a") if file else None  # noqa: SIM115
         self.quiet = quiet
         self.width = 12
@@ -33,8 +34,7 @@ class LogSink:
                 self._colour[name] = _COLOURS[len(self._colour) % len(_COLOURS)]
             tag = name.ljust(self.width)
             if self._file:
-                self._file.write(f"{tag}| {text}\n")
-                self._file.flush()
+                self._write_file(f"{tag}| {text}\n")
             if self.quiet:
                 return
             if self._tty:
@@ -42,9 +42,28 @@ class LogSink:
             else:
                 print(f"{tag}| {text}", flush=True)
 
+    def _write_file(self, line: str) -> None:
+        """A run log that cannot be written any more (disk full) must not stop the run: the
+        lines go on to the terminal, with one line saying why the file ends here."""
+        assert self._file is not None
+        try:
+            self._file.write(line)
+            self._file.flush()
+        except OSError as exc:
+            with contextlib.suppress(OSError):
+                self._file.close()
+            self._file = None
+            print(
+                f"{'supervisor'.ljust(self.width)}| cannot write the run log {self.path}: "
+                f"{exc.strerror or exc}; logging to the terminal only",
+                file=sys.stderr,
+                flush=True,
+            )
+
     def close(self) -> None:
         if self._file:
-            self._file.close()
+            with contextlib.suppress(OSError):
+                self._file.close()
 
 
 @dataclass
@@ -83,6 +102,11 @@ class ManagedProcess:
             text = raw.decode(errors="replace").rstrip()
             self.tail = [*self.tail[-19:], text]
             self.sink.line(self.name, text)
+
+    def drain(self, timeout_s: float = 1.0) -> None:
+        """Wait (briefly) until an ended process's last output lines are in ``tail``."""
+        if self._reader is not None and not self.running():
+            self._reader.join(timeout=timeout_s)
 
     @property
     def pid(self) -> int | None:

@@ -44,6 +44,11 @@ class ServiceEntry(_Strict):
     main: bool = Field(default=False, description="The run ends when this service exits.")
     enabled: bool = Field(default=True, description="False: listed but not started.")
     start_timeout_s: float = Field(default=60.0, gt=0, description="Until its health is up.")
+    host: str | None = Field(
+        default=None,
+        description="Multi-host stacks: the host that runs it (None: every host). Services of "
+        "other hosts are not started here but are part of the lock-step graph.",
+    )
 
 
 class RouterEntry(_Strict):
@@ -52,6 +57,16 @@ class RouterEntry(_Strict):
     enabled: bool = Field(default=True, description="False: use an already running router.")
     listen: tuple[str, ...] = Field(default=(DEFAULT_ENDPOINT,), description="Endpoints.")
     zenoh_config: Path | None = Field(default=None, description="Zenoh json5 for the router.")
+    host: str | None = Field(default=None, description="Multi-host: the host that runs it.")
+    connect: tuple[str, ...] = Field(
+        default=(),
+        description="Where processes of this host reach the router (default: its listen "
+        "endpoint on this machine); needed on hosts that do not run it.",
+    )
+    restart: RestartPolicy = Field(
+        default_factory=RestartPolicy,
+        description="Restart a router that dies (clients re-dial it, see services/bus/README).",
+    )
 
 
 class RecordingEntry(_Strict):
@@ -60,6 +75,26 @@ class RecordingEntry(_Strict):
     enabled: bool = Field(default=True, description="Record the run to MCAP.")
     dir: Path = Field(default=Path("recordings"), description="Where the MCAP goes.")
     settings: dict[str, Any] = Field(default_factory=dict, description="Recorder settings.")
+    host: str | None = Field(default=None, description="Multi-host: the host that records.")
+    restart: RestartPolicy = Field(
+        default_factory=lambda: RestartPolicy(policy="on-failure"),
+        description="A recorder that dies restarts into the next part file (<run>.1.mcap, ...).",
+    )
+    required: bool = Field(
+        default=False,
+        description="True: the run stops when the recording fails for good (disk full, no "
+        "permission). False: the robot goes on unrecorded, with a clear error in the log.",
+    )
+
+
+class SecurityEntry(_Strict):
+    """The secured profile: mutual TLS on every link, the router's access control."""
+
+    tls_dir: Path | None = Field(
+        default=None,
+        description="Certificates made by `harvest certs make DIR`; each process presents its "
+        "own (common name = its name). Set: the router must listen on tls/ endpoints.",
+    )
 
 
 class Stack(_Strict):
@@ -73,6 +108,12 @@ class Stack(_Strict):
     seed: int | None = Field(default=None, description="Scenario seed, recorded in metadata.")
     router: RouterEntry = Field(default_factory=RouterEntry, description="The router.")
     recording: RecordingEntry = Field(default_factory=RecordingEntry, description="Recording.")
+    security: SecurityEntry = Field(default_factory=SecurityEntry, description="TLS and ACL.")
+    host: str | None = Field(
+        default=None,
+        description="Multi-host: the host this supervisor runs (`harvest run --host`); only "
+        "the router, recorder and services of this host are started. None: all of them.",
+    )
     services: dict[str, ServiceEntry] = Field(description="Services, in start order.")
     profiles: dict[str, dict[str, Any]] = Field(default_factory=dict, description="Overlays.")
 
@@ -83,10 +124,32 @@ class Stack(_Strict):
                 raise ValueError(str(UnknownServiceError(name)))
         if self.master is not None and self.master not in self.services:
             raise ValueError(f"master {self.master!r} is not one of the services")
+        if self.security.tls_dir is not None:
+            plain = [e for e in self.router.listen if not e.startswith(("tls/", "quic/"))]
+            if plain:
+                raise ValueError(
+                    f"security.tls_dir is set but router.listen has unencrypted endpoints "
+                    f"{plain}: use tls/HOST:PORT"
+                )
         return self
 
     def enabled(self) -> list[str]:
+        """Every enabled service of the graph, on any host."""
         return [n for n, e in self.services.items() if e.enabled]
+
+    def here(self, host: str | None) -> bool:
+        """Whether something assigned to ``host`` runs on this supervisor's host."""
+        return self.host is None or host is None or host == self.host
+
+    def local(self) -> list[str]:
+        """The enabled services this supervisor starts."""
+        return [n for n in self.enabled() if self.here(self.services[n].host)]
+
+    def records_here(self) -> bool:
+        return self.recording.enabled and self.here(self.recording.host)
+
+    def routes_here(self) -> bool:
+        return self.router.enabled and self.here(self.router.host)
 
 
 class StackError(ValueError):
@@ -130,7 +193,8 @@ def load_stack(
 
 
 def resolve_service_settings(stack: Stack) -> dict[str, ServiceSettings]:
-    """Validate every enabled service's settings (and the recorder's) before anything starts."""
+    """Validate every enabled service's settings (and the recorder's) before anything starts;
+    on every host of a multi-host stack, so the recording's metadata describes the whole run."""
     out: dict[str, ServiceSettings] = {}
     blocks = {n: stack.services[n].settings for n in stack.enabled()}
     if stack.recording.enabled:

@@ -77,3 +77,18 @@ def test_ignored_fruit_are_left_out_and_the_trunk_kept() -> None:
 def test_an_empty_obstacle_set_gives_empty_arrays() -> None:
     a = obstacle_arrays(Obstacles())
     assert a.count == 0 and a.ellipsoid_centers_m.shape == (0, 3)
+
+
+def test_a_scene_with_too_many_obstacles_is_refused_and_counted() -> None:
+    """10,000 fruit would cost over a minute per tick: the scene is refused, the arms hold."""
+    from services.controller import SERVICE
+    from services.controller.kinsim import KinematicSim
+    from services.controller.scenarios import fruit, scene
+    from services.runtime.settings import load_settings
+
+    core = SERVICE.make_core(load_settings(SERVICE.settings, {"max_obstacles": 5}))
+    core.handle("scene/state", scene([fruit(i + 1, (0.8, 0.01 * i, 1.0)) for i in range(6)]))
+    assert core.counters.rejected_scenes == 1
+    assert "6 obstacles, more than max_obstacles 5" in core.scene_refused
+    outs = dict(core.handle("robot/joint_state", KinematicSim().joint_state()))
+    assert outs["robot/command"].hold

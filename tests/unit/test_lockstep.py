@@ -91,6 +91,27 @@ def test_input_order_drops_duplicates_and_backwards_stamps() -> None:
     assert o.check("u", 5, 0) is None  # topics are independent
 
 
+def test_a_repeated_answer_is_counted_once() -> None:
+    """A consumer re-publishes its answer when the master re-sends a stalled tick; the copy that
+    arrives after the first one must not satisfy the next group at the same stamp."""
+    b = AnswerBarrier({"demo/tick": ("demo/answer",)})
+    b.expect("demo/tick", 5)
+    b.note("demo/answer", 5, seq=7)
+    b.note("demo/answer", 5, seq=7)  # the re-published copy
+    b.wait(lambda: None, 1.0, 1.0, str)
+    b.expect("demo/tick", 5)
+    b.note("demo/answer", 5, seq=7)  # a late copy, after the group was closed
+    assert b.missing() == [("demo/answer", 5)]
+    b.note("demo/answer", 5, seq=8)
+    assert b.missing() == []
+
+
+def test_input_order_tells_an_exact_repeat() -> None:
+    o = InputOrder()
+    assert o.check("t", 3, 30) is None
+    assert o.repeat("t", 3, 30) and not o.repeat("t", 3, 31) and not o.repeat("u", 3, 30)
+
+
 def test_barrier_gives_up_at_once_when_the_process_stops() -> None:
     # A run whose main service finished stops the master while it awaits answers that will
     # never come: the wait must end now, not after the stall timeout.
@@ -103,3 +124,22 @@ def test_barrier_gives_up_at_once_when_the_process_stops() -> None:
         b.wait(lambda: None, 10.0, 30.0, lambda m: str(m[0][0]) + f" @ {m[0][1]} ns", stop.is_set)
     assert time.monotonic() - t0 < 2.0
     assert b.missing() == []  # the abandoned group is forgotten
+
+
+def test_core_counters_of_a_mapping_a_dataclass_and_anything_else() -> None:
+    from collections import Counter
+
+    from services.controller.core import Counters
+    from services.runtime.node import core_counters
+
+    class Core:
+        counters: object = None
+
+    c = Core()
+    assert core_counters(c) == {}
+    c.counters = Counter({"b": 2, "a": 1})
+    assert core_counters(c) == {"a": 1, "b": 2}
+    c.counters = Counters(watchdog_stops=3)  # the controller's: its status query once failed
+    assert core_counters(c)["watchdog_stops"] == 3
+    c.counters = "nonsense"
+    assert core_counters(c) == {}

@@ -93,3 +93,17 @@ def test_inside_dish_tells_a_resting_fruit_from_the_one_hanging_over_the_dish() 
     assert inside_dish(np.array([0.62, 0.01, 1.04]), dish, 0.02)  # resting: centre d_v up
     assert not inside_dish(np.array([0.6, 0.0, 1.0 + 0.045 + 0.01 + 0.03]), dish, 0.02)
     assert not inside_dish(np.array([0.75, 0.0, 1.04]), dish, 0.02)  # beside the dish
+
+
+def test_a_much_smaller_unflagged_view_does_not_move_a_target_planned_from_a_whole_one() -> None:
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    b.update(scene(fruit(3, (0.7, 0.05, 1.25))), never)  # whole, d_h 4 cm
+    small = fruit(3, (0.69, 0.059, 1.242)).model_copy(
+        update={"semi_axis_h_m": 0.029, "semi_axis_v_m": 0.027}
+    )
+    b.update(scene(small), never)  # seen after a tracker restart, an arm in front: 27 % smaller
+    r = b.records[3]
+    assert np.allclose(r.planned.centre_world_m, (0.7, 0.05, 1.25)) and r.planned.d_h_m == 0.04
+    assert b.moved == []
+    b.update(scene(fruit(3, (0.75, 0.05, 1.25))), never)  # the same size, moved: re-planned
+    assert np.allclose(r.planned.centre_world_m, (0.75, 0.05, 1.25)) and b.moved
