@@ -259,6 +259,15 @@ def truth_reachability(truth: GroundTruth, planner_settings: dict[str, Any]) -> 
     return Truth({i: i in done for i in sorted(shapes)}, why)
 
 
+def _sim_fruit(p: Any, centres: dict[int, np.ndarray]) -> int | None:
+    """The sim fruit whose true centre is nearest a track's position, within MATCH_M."""
+    d = {i: float(np.linalg.norm(c - np.array(p))) for i, c in centres.items()}
+    if not d:
+        return None
+    i = min(d, key=lambda k: (d[k], k))
+    return i if d[i] <= MATCH_M else None
+
+
 TARGET_ENDS = ("fruit_collected", "fruit_dropped", "fruit_skipped", "fruit_lost", "run_finished")
 
 
@@ -267,13 +276,9 @@ def _contacts(got: Collected, centres: dict[int, np.ndarray]) -> dict[str, int]:
     being harvested at the time (the tools are meant to touch it: cutting at its peduncle, the
     dish under it) and with anything else (trunk, branches, leaves' twigs, other fruit, the
     robot itself): the latter are the collisions."""
-    to_sim: dict[int, int] = {}
-    for tid, p in got.last_position.items():
-        d = {i: float(np.linalg.norm(c - np.array(p))) for i, c in centres.items()}
-        if d:
-            i = min(d, key=lambda k: (d[k], k))
-            if d[i] <= MATCH_M:
-                to_sim[tid] = i
+    to_sim = {
+        tid: i for tid, p in got.last_position.items() if (i := _sim_fruit(p, centres)) is not None
+    }
     windows: list[tuple[int, int, int]] = []  # (start ns, end ns, sim fruit)
     current: tuple[int, int] | None = None  # (start ns, sim fruit)
     for ev in got.harvest_events:
@@ -309,11 +314,8 @@ def evaluate(
     outcome: dict[int, str] = {}  # sim fruit → the planner's outcome
     for r in s.fruits if s is not None else ():
         p = got.last_position.get(r.fruit_id)
-        if p is None:
-            continue
-        d = {i: float(np.linalg.norm(c - np.array(p))) for i, c in centres.items()}
-        i = min(d, key=lambda k: (d[k], k))
-        if d[i] <= MATCH_M:
+        i = None if p is None else _sim_fruit(p, centres)
+        if i is not None:
             outcome.setdefault(i, r.outcome)
     collected = {e.fruit_id for e in got.sim_events if e.kind == "collected"}
     reachable = sorted(i for i, ok in reach.items() if ok)

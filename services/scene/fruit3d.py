@@ -236,9 +236,7 @@ def _tight_box(box: Box, K: Pinhole, depth_m: np.ndarray, hsv: np.ndarray, p: Fr
         return box
     # The farthest supported depth cluster of the whole box: occluders (an orange arm too) are
     # nearer than the fruit.
-    z = win.z[pool]
-    need = max(p.min_pixels, math.ceil(p.min_support_share * len(z)))
-    z_front = float(np.median(far_cluster(z, max(0.01 * float(np.median(z)), 0.005), need)))
+    z_front = _far_depth(win.z[pool], p)
     mine = pool & (win.z > z_front - 0.015) & (win.z < z_front + 1.5 * p.max_semi_axis_m)
     if int(mine.sum()) < p.min_pixels:
         return box
@@ -261,7 +259,11 @@ def _front_depth(box: Box, win: _Window, pool: np.ndarray, p: FruitParams) -> fl
     x1, y1, x2, y2 = box
     qx, qy = (x2 - x1) / 4, (y2 - y1) / 4
     mid = pool & (win.u > x1 + qx) & (win.u < x2 - qx) & (win.v > y1 + qy) & (win.v < y2 - qy)
-    z = win.z[mid] if mid.sum() >= p.min_pixels else win.z[pool]
+    return _far_depth(win.z[mid] if mid.sum() >= p.min_pixels else win.z[pool], p)
+
+
+def _far_depth(z: np.ndarray, p: FruitParams) -> float:
+    """Median of the farthest well-supported depth cluster (occluders are nearer)."""
     need = max(p.min_pixels, math.ceil(p.min_support_share * len(z)))
     return float(np.median(far_cluster(z, max(0.01 * float(np.median(z)), 0.005), need)))
 
