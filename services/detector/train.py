@@ -315,8 +315,9 @@ def finalize(cfg: TrainConfig, summary: dict[str, Any], command: str) -> dict[st
     best = load_weights(Path(cfg.out_dir) / "best.pt")
     net = best.net.to(device)
     threshold = choose_threshold(net, cfg.val, device)
+    # .cpu(): the net sits on the training device (a CUDA tensor has no .numpy()).
     digest = hashlib.sha256(
-        b"".join(v.numpy().tobytes() for v in best.net.state_dict().values())
+        b"".join(v.detach().cpu().numpy().tobytes() for v in net.state_dict().values())
     ).hexdigest()[:8]
     meta = {
         "version": f"v1-{digest}",

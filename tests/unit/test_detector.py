@@ -126,7 +126,7 @@ def test_hsv_baseline_finds_the_scripted_fruit() -> None:
 
 
 def test_training_is_seeded_and_resumes_to_the_same_weights(tmp_path: Path) -> None:
-    from services.detector.train import DataSpec, TrainConfig, train
+    from services.detector.train import DataSpec, TrainConfig, finalize, train
 
     train_set = write_dataset(tmp_path, 4, 10)
     val_set = write_dataset(tmp_path, 2, 20)
@@ -156,3 +156,11 @@ def test_training_is_seeded_and_resumes_to_the_same_weights(tmp_path: Path) -> N
     assert "set20/ap50" in summary["best"]["metrics"]
     det = OrangeDetector(load_weights(tmp_path / "b" / "best.pt").net, score_min=0.0)
     assert det.detect(np.zeros((120, 160, 3), np.uint8)).shape[1] == 5
+    meta = finalize(cfg("b", 2), summary, "harvest train detector --epochs 2")
+    shipped = load_weights(tmp_path / "b" / "w.pt")
+    assert meta["version"].startswith("v1-") and 0.0 <= meta["score_threshold"] <= 1.0
+    assert all(torch.equal(shipped.net.state_dict()[k], v) for k, v in best_state(tmp_path).items())
+
+
+def best_state(tmp_path: Path) -> dict[str, torch.Tensor]:
+    return dict(load_weights(tmp_path / "b" / "best.pt").net.state_dict())
