@@ -144,6 +144,7 @@ class Player:
         self.stop = threading.Event()
         self._pending: list[_Awaited] = []  # recorded outputs not yet awaited
         self._done: list[Dep] = []  # outputs in since the previous publish
+        self._done_before: list[Dep] = []  # those attached to the previous publish
 
     def run(self, messages: Iterable[RecordedMessage], speed: float | None = None) -> PlayStats:
         """``speed`` None: lock-step; 0: as fast as possible; > 0: recorded pace × speed."""
@@ -208,8 +209,12 @@ class Player:
             else:
                 self.stats.timed_out += 1
         self._pending = keep
+        # With those of the previous publish: a message published right after another (the
+        # basket after the joint state) follows the same outputs.
         done, self._done = self._done, []
-        return encode_after(done)
+        attachment = encode_after([*self._done_before, *done])
+        self._done_before = done or self._done_before
+        return attachment
 
 
 def _encoding(topic: str) -> str:

@@ -147,6 +147,7 @@ class Node:
         self._held_since: float | None = None  # when the queue's head started waiting
         self.causal_timeouts = 0
         self._group_attachment: bytes | None = None  # master: of the group last published
+        self._noted_before: list[Dep] = []  # master: the answers attached the group before
         self._cv = threading.Condition()
         self._order = InputOrder()
         # topic → (seq, outputs, attachment): a repeat is answered byte for byte
@@ -396,8 +397,12 @@ class Node:
         if self.barrier is None:
             self.publish(group)
             return
-        # The answers awaited since the previous group caused this one: consumers take them first.
-        attachment = encode_after(self.barrier.take_noted())
+        # The answers awaited since the previous group caused this one: consumers take them
+        # first. Those of the group before are added: a consumer that does not take the
+        # answers between (the controller, no camera frames) still waits for the older ones.
+        noted = self.barrier.take_noted()
+        attachment = encode_after([*self._noted_before, *noted])
+        self._noted_before = noted
         self._group_attachment = attachment
         self.publish(group, attachment)
         for topic, msg in group:
