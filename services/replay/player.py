@@ -149,9 +149,12 @@ class Player:
     def run(self, messages: Iterable[RecordedMessage], speed: float | None = None) -> PlayStats:
         """``speed`` None: lock-step; 0: as fast as possible; > 0: recorded pace × speed."""
         t0 = time.monotonic()
+        if speed is None and self.collector is not None:
+            self._run_lockstep(messages)
+            self.stats.wall_s = time.monotonic() - t0
+            return self.stats
         first_log: int | None = None
-        lockstep = speed is None and self.collector is not None
-        for i, m in enumerate(by_stamp(messages) if lockstep else messages):
+        for i, m in enumerate(messages):
             if self.stop.is_set():
                 break
             if self.progress:
@@ -159,24 +162,50 @@ class Player:
             if m.derived or m.topic.startswith(REJECTED_PREFIX):
                 self.stats.skipped += 1
                 continue
-            if m.topic in self.await_ and lockstep:
-                self._defer(m)
-                continue
             if not self.publish(m.topic):
                 self.stats.skipped += 1
                 continue
-            attachment = self._settle(m) if lockstep else None
             if speed:
                 first_log = m.log_time_ns if first_log is None else first_log
                 lag = (m.log_time_ns - first_log) * 1e-9 / speed - (time.monotonic() - t0)
                 if lag > 0:
                     self.stop.wait(lag)
-            self.bus.put_raw(m.topic, m.payload, m.encoding or _encoding(m.topic), attachment)
+            self.bus.put_raw(m.topic, m.payload, m.encoding or _encoding(m.topic))
             self.stats.published += 1
-        if lockstep and not self.stop.is_set():
-            self._settle(None)
         self.stats.wall_s = time.monotonic() - t0
         return self.stats
+
+    def _run_lockstep(self, messages: Iterable[RecordedMessage]) -> None:
+        """Stamp order; consecutive inputs of one stamp (no output recorded between them: the
+        master's group) are published together, each naming the others as its ``group``."""
+        run: list[RecordedMessage] = []
+        for i, m in enumerate(by_stamp(messages)):
+            if self.stop.is_set():
+                return
+            if self.progress:
+                self.progress(i)
+            if m.derived or m.topic.startswith(REJECTED_PREFIX):
+                self.stats.skipped += 1
+            elif m.topic in self.await_:
+                self._flush(run)
+                self._defer(m)
+            elif not self.publish(m.topic):
+                self.stats.skipped += 1
+            else:
+                if run and run[0].publish_time_ns != m.publish_time_ns:
+                    self._flush(run)
+                run.append(m)
+        if not self.stop.is_set():
+            self._flush(run)
+            self._settle(None)
+
+    def _flush(self, run: list[RecordedMessage]) -> None:
+        group = [_dep_of(m) for m in run]
+        for m in run:
+            attachment = encode_after(self._settle(m), group)
+            self.bus.put_raw(m.topic, m.payload, m.encoding or _encoding(m.topic), attachment)
+            self.stats.published += 1
+        run.clear()
 
     def _alive_of(self, topic: str) -> Callable[[], bool]:
         return lambda: self.alive(topic)
@@ -193,9 +222,9 @@ class Player:
         self.stats.awaited += 1
         self._pending.append(_Awaited(m.topic, stamp_ns, seq))
 
-    def _settle(self, m: RecordedMessage | None) -> bytes | None:
+    def _settle(self, m: RecordedMessage | None) -> list[Dep]:
         """Before publishing ``m`` (None: the end): await the pending outputs, except those
-        that ``m`` causes; return the attachment naming the ones that came in."""
+        that ``m`` causes; return the predecessors of ``m``: the ones that came in."""
         assert self.collector is not None
         caused = self.caused_by.get(m.topic, frozenset()) if m is not None else frozenset()
         keep = []
@@ -212,9 +241,19 @@ class Player:
         # With those of the previous publish: a message published right after another (the
         # basket after the joint state) follows the same outputs.
         done, self._done = self._done, []
-        attachment = encode_after([*self._done_before, *done])
+        after = [*self._done_before, *done]
         self._done_before = done or self._done_before
-        return attachment
+        return after
+
+
+def _dep_of(m: RecordedMessage) -> Dep:
+    """(topic, stamp, seq) of a recorded message, from its header when it has one."""
+    t = TOPICS.get(m.topic)
+    try:
+        h = t.codec.header(m.payload) if t else None
+    except DecodeError:
+        h = None
+    return (m.topic, h.stamp_ns, h.seq) if h else (m.topic, m.publish_time_ns, m.sequence)
 
 
 def _encoding(topic: str) -> str:

@@ -7,34 +7,61 @@ state of tick k+1, and now and then that joint state reached the controller befo
 (resim of controller + planner: 1 control/status in ~3,000 differed). So a lock-step publisher
 attaches to each message its causal predecessors, ``after``: the master the answers it awaited
 since its previous group, the resim player the outputs it awaited since its previous publish, a
-service the ``after`` of the input it answers plus that input. A consumer hands an input to its
-core only once every predecessor on a topic it takes has arrived, and hands those first: what a
-step consumes no longer depends on arrival order.
+service the ``after`` of the input it answers plus that input and its ``group``. ``group`` names
+the messages published together with a message (the master's group: the joint state, the
+basket, the sim's events): they are not predecessors of each other, but they all precede an
+answer to any of them (the planner takes the basket before the control status that answers the
+joint state published with it). A consumer hands an input to its core only once every
+predecessor on a topic it takes has arrived, and hands those first: what a step consumes no
+longer depends on arrival order.
 """
 
 from __future__ import annotations
 
 import json
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 
 Dep = tuple[str, int, int]  # (topic, stamp_ns, seq) of a message that must be handled first
 
 
-def encode_after(after: Iterable[Dep]) -> bytes | None:
-    """The Zenoh attachment carrying ``after`` (None when there is nothing to carry)."""
-    deps = sorted(set(after))
-    return json.dumps({"after": deps}, separators=(",", ":")).encode() if deps else None
+@dataclass(frozen=True)
+class Causes:
+    """What a message carries: its predecessors, and the messages published with it."""
+
+    after: tuple[Dep, ...] = ()
+    group: tuple[Dep, ...] = ()
+
+    def of_answer(self, answered: Dep) -> tuple[Dep, ...]:
+        """The predecessors of an answer to this message (``answered``)."""
+        return (*self.after, *self.group, answered)
 
 
-def decode_after(attachment: bytes | None) -> tuple[Dep, ...]:
-    """``after`` from an attachment; anything unreadable is no constraint (never a crash)."""
+NO_CAUSES = Causes()
+
+
+def encode_after(after: Iterable[Dep], group: Iterable[Dep] = ()) -> bytes | None:
+    """The Zenoh attachment carrying ``after`` and ``group`` (None when both are empty)."""
+    deps, together = sorted(set(after)), sorted(set(group))
+    if not deps and not together:
+        return None
+    out: dict[str, list[Dep]] = {"after": deps}
+    if together:
+        out["group"] = together
+    return json.dumps(out, separators=(",", ":")).encode()
+
+
+def decode_after(attachment: bytes | None) -> Causes:
+    """The causes in an attachment; anything unreadable is no constraint (never a crash)."""
     if not attachment:
-        return ()
+        return NO_CAUSES
     try:
-        raw = json.loads(attachment)["after"]
-        return tuple((str(t), int(s), int(q)) for t, s, q in raw)
-    except (ValueError, KeyError, TypeError):
-        return ()
+        raw = json.loads(attachment)
+        after = tuple((str(t), int(s), int(q)) for t, s, q in raw["after"])
+        group = tuple((str(t), int(s), int(q)) for t, s, q in raw.get("group", ()))
+    except (ValueError, KeyError, TypeError, AttributeError):
+        return NO_CAUSES
+    return Causes(after, group)
 
 
 def covers(dep: Dep, topic: str, stamp_ns: int, seq: int) -> bool:

@@ -27,7 +27,15 @@ from typing import Any, Literal, Protocol
 from schemas.service import ServiceState, ServiceStatus
 from services import __version__
 from services.bus import Bus, BusSettings
-from services.runtime.causal import CausalGate, Dep, decode_after, encode_after, next_in_order
+from services.runtime.causal import (
+    NO_CAUSES,
+    CausalGate,
+    Causes,
+    Dep,
+    decode_after,
+    encode_after,
+    next_in_order,
+)
 from services.runtime.lockstep import AnswerBarrier, LockstepPlan, LockstepStall, LockstepStopped
 from services.runtime.spec import NodeSpec
 
@@ -36,7 +44,7 @@ log = logging.getLogger("node")
 Output = tuple[str, Any]
 Mode = Literal["lockstep", "live"]
 _REANSWER = "\x00reanswer"  # queue marker: publish the cached answer to (topic, seq) again
-Queued = tuple[str, Any, tuple[Dep, ...]]  # (topic, message, its causal predecessors)
+Queued = tuple[str, Any, Causes]  # (topic, message, its causes)
 
 
 class Core(Protocol):
@@ -200,7 +208,7 @@ class Node:
     def _on_input(self, topic: str, msg: Any, attachment: bytes | None = None) -> None:
         header = msg.header
         is_input = topic in self.spec.inputs
-        after = decode_after(attachment) if self.mode == "lockstep" else ()
+        causes = decode_after(attachment) if self.mode == "lockstep" else NO_CAUSES
         with self._cv:
             if is_input:
                 repeat = self._order.repeat(topic, header.seq, header.stamp_ns)
@@ -208,13 +216,13 @@ class Node:
                 if problem:
                     self.bus.reject(topic, problem)
                     if repeat and self._reanswers(topic):
-                        self._queue.append((_REANSWER, (topic, header.seq), ()))
+                        self._queue.append((_REANSWER, (topic, header.seq), NO_CAUSES))
                         self._cv.notify_all()
                     return
                 if self.mode == "live" and topic in self.spec.conflate:
                     self._drop_pending(topic)
                 self._gate.arrived(topic, header.stamp_ns, header.seq)
-                self._queue.append((topic, msg, after))
+                self._queue.append((topic, msg, causes))
                 self._cv.notify_all()
         if self.barrier is not None:
             self.barrier.note(topic, header.stamp_ns, header.seq)
@@ -255,8 +263,8 @@ class Node:
         order waits for a predecessor (at most ``causal_wait_s``)."""
         while self._queue:
             view = [
-                None if t == _REANSWER else (t, m.header.stamp_ns, m.header.seq, after)
-                for t, m, after in self._queue
+                None if t == _REANSWER else (t, m.header.stamp_ns, m.header.seq, c.after)
+                for t, m, c in self._queue
             ]
             i, missing = next_in_order(view, self._gate)
             if not missing:
@@ -264,7 +272,7 @@ class Node:
             topic, msg, _ = self._queue[i]
             if not self._give_up_waiting(topic, msg, missing):
                 return None
-            self._queue[i] = (topic, msg, ())
+            self._queue[i] = (topic, msg, NO_CAUSES)
         return None
 
     def _give_up_waiting(self, topic: str, msg: Any, missing: list[Dep]) -> bool:
@@ -339,9 +347,9 @@ class Node:
                 next_due = max(next_due + period_s, time.monotonic())
                 self.publish(self._call_timer(fn))
 
-    def _handle(self, core: Core, topic: str, msg: Any, after: tuple[Dep, ...] = ()) -> None:
+    def _handle(self, core: Core, topic: str, msg: Any, causes: Causes = NO_CAUSES) -> None:
         """One input: the core's outputs are published (and kept, to answer a repeat). In
-        lock-step they carry the input's predecessors and the input itself (``causal.py``)."""
+        lock-step they carry the input's predecessors, its group and the input itself."""
         if topic == _REANSWER:
             key, seq = msg
             done = self._answered.get(key)
@@ -352,7 +360,8 @@ class Node:
         outputs = self.call(core.handle, topic, msg)
         attachment = None
         if self.mode == "lockstep":
-            attachment = encode_after((*after, (topic, msg.header.stamp_ns, msg.header.seq)))
+            answered = (topic, msg.header.stamp_ns, msg.header.seq)
+            attachment = encode_after(causes.of_answer(answered))
         self.publish(outputs, attachment)
         if self._reanswers(topic):
             self._answered[topic] = (msg.header.seq, outputs, attachment)
@@ -401,7 +410,8 @@ class Node:
         # first. Those of the group before are added: a consumer that does not take the
         # answers between (the controller, no camera frames) still waits for the older ones.
         noted = self.barrier.take_noted()
-        attachment = encode_after([*self._noted_before, *noted])
+        group_deps = [(t, m.header.stamp_ns, m.header.seq) for t, m in group]
+        attachment = encode_after([*self._noted_before, *noted], group_deps)
         self._noted_before = noted
         self._group_attachment = attachment
         self.publish(group, attachment)

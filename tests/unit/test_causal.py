@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 from services.runtime.causal import (
+    NO_CAUSES,
     CausalGate,
+    Causes,
     Entry,
     decode_after,
     encode_after,
@@ -22,10 +24,30 @@ def _gate(*arrived: tuple[str, int, int]) -> CausalGate:
 
 def test_after_round_trips_and_bad_attachments_are_no_constraint() -> None:
     after = [("scene/state", 200, 3), TARGET_0]
-    assert decode_after(encode_after(after)) == tuple(sorted(after))
+    group = [("robot/joint_state", 200, 1), ("robot/basket", 200, 0)]
+    assert decode_after(encode_after(after)) == Causes(tuple(sorted(after)))
+    assert decode_after(encode_after(after, group)) == Causes(
+        tuple(sorted(after)), tuple(sorted(group))
+    )
     assert encode_after([]) is None
-    for bad in (None, b"", b"not json", b'{"x": 1}', b'{"after": [[1]]}'):
-        assert decode_after(bad) == ()
+    for bad in (None, b"", b"not json", b'{"x": 1}', b'{"after": [[1]]}', b"[1]"):
+        assert decode_after(bad) == NO_CAUSES
+
+
+def test_an_answer_follows_the_whole_group_of_what_it_answers() -> None:
+    # The control status answering the joint state must come after the basket published with
+    # that joint state (the planner takes both), though the basket does not precede the joint
+    # state itself.
+    js, basket = ("robot/joint_state", 200, 1), ("robot/basket", 200, 0)
+    c = Causes(after=(TARGET_0,), group=(js, basket))
+    assert set(c.of_answer(js)) == {TARGET_0, js, basket}
+    g = CausalGate(("control/status", "robot/basket", "robot/joint_state"))
+    g.arrived("robot/joint_state", 200, 1)
+    g.arrived("control/status", 200, 1)
+    status: Entry = ("control/status", 200, 1, c.of_answer(js))
+    assert next_in_order([status], g) == (0, [basket])
+    g.arrived(*basket)
+    assert next_in_order([status, (*basket, ())], g) == (1, [])
 
 
 def test_a_predecessor_on_an_input_is_missing_until_it_arrives() -> None:

@@ -22,6 +22,10 @@ def _tick(k: int) -> RecordedMessage:
     return _rec("demo/tick", msg)
 
 
+def _tick_at(k: int, stamp_ns: int) -> DemoTick:
+    return DemoTick(header=Header(stamp_ns=stamp_ns, seq=k, source="clock"), tick=k, value=0.0)
+
+
 def _answer(k: int) -> RecordedMessage:
     h = Header(stamp_ns=100 * k, seq=k, source="worker", answers_seq=k)
     return _rec("demo/answer", DemoAnswer(header=h, tick=k, result=0.0, worker_state=k))
@@ -76,7 +80,7 @@ def test_an_answer_recorded_before_its_tick_does_not_stall_the_player() -> None:
 def test_each_tick_carries_the_answers_it_waited_for_as_predecessors() -> None:
     bus = FakeBus()
     _play(bus, [_tick(0), _answer(0), _tick(1), _answer(1), _tick(2)])
-    after = [decode_after(a) for _, _, a in bus.published]
+    after = [decode_after(a).after for _, _, a in bus.published]
     # Tick 2 also names answer 0 (that of the publish before): a consumer that did not take
     # answer 1 still takes answer 0 first.
     assert after == [
@@ -84,6 +88,14 @@ def test_each_tick_carries_the_answers_it_waited_for_as_predecessors() -> None:
         (("demo/answer", 0, 0),),
         (("demo/answer", 0, 0), ("demo/answer", 100, 1)),
     ]
+
+
+def test_inputs_published_together_name_each_other_as_their_group() -> None:
+    # Two ticks at one stamp with no answer recorded between them: the master's group.
+    bus = FakeBus(answers=False)
+    _play(bus, [_tick(0), _rec("demo/tick", _tick_at(1, 0))], 0.1)
+    groups = [decode_after(a).group for _, _, a in bus.published]
+    assert groups == [(("demo/tick", 0, 0), ("demo/tick", 0, 1))] * 2
 
 
 def test_an_answer_that_never_comes_is_counted_and_the_walk_goes_on() -> None:
