@@ -238,11 +238,6 @@ class Node:
             self._queue.clear()
             self._queue.extend(kept)
 
-    def next_input(self, timeout_s: float | None = None) -> Output | None:
-        """The next input in causal order, waiting up to ``timeout_s``; None on stop or timeout."""
-        item = self.next_queued(timeout_s)
-        return None if item is None else (item[0], item[1])
-
     def next_queued(self, timeout_s: float | None = None) -> Queued | None:
         """Normally the oldest input; but one whose predecessors have not all arrived waits, and
         a predecessor queued behind it goes first."""
