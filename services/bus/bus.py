@@ -83,12 +83,15 @@ class Publisher:
     def __init__(self, pub: Any, t: Topic, counters: Counters) -> None:
         self._pub, self.topic, self._c = pub, t, counters
 
-    def put(self, msg: Any) -> None:
-        self.put_bytes(self.topic.codec.encode(msg), msg.header.seq)
+    def put(self, msg: Any, attachment: bytes | None = None) -> None:
+        self.put_bytes(self.topic.codec.encode(msg), msg.header.seq, attachment)
 
-    def put_bytes(self, payload: bytes, seq: int | None = None) -> None:
-        """Publish an already-encoded payload (replay); ``seq`` only feeds the counters."""
-        self._pub.put(payload)
+    def put_bytes(
+        self, payload: bytes, seq: int | None = None, attachment: bytes | None = None
+    ) -> None:
+        """Publish an already-encoded payload (replay); ``seq`` only feeds the counters;
+        ``attachment`` travels beside the payload (lock-step causal order), never in it."""
+        self._pub.put(payload, attachment=attachment)
         self._c.published += 1
         self._c.last_seq = seq
 
@@ -129,10 +132,13 @@ class Bus:
         self._handles.append(pub)
         return Publisher(pub, t, self.counters_for(key))
 
-    def subscribe(self, key: str, on_message: Callable[[str, Any], None]) -> None:
+    def subscribe(
+        self, key: str, on_message: Callable[..., None], with_attachment: bool = False
+    ) -> None:
         """Decode every sample of ``key`` with its codec; bad payloads are counted and dropped.
 
-        ``on_message(key, msg)`` runs on a Zenoh thread; it must be quick and must not raise.
+        ``on_message(key, msg)`` (``on_message(key, msg, attachment)`` with ``with_attachment``)
+        runs on a Zenoh thread; it must be quick and must not raise.
         """
         t = topic(key)
         c = self.counters_for(key)
@@ -147,7 +153,11 @@ class Bus:
                 return
             c.received += 1
             c.last_seq = msg.header.seq
-            on_message(key, msg)
+            if with_attachment:
+                att = sample.attachment
+                on_message(key, msg, att.to_bytes() if att is not None else None)
+            else:
+                on_message(key, msg)
 
         self._handles.append(self.session.declare_subscriber(key, _in_order(cb)))
 
@@ -175,7 +185,9 @@ class Bus:
         c.last_reject_reason = reason
         self._reject_log(key, reason)
 
-    def put_raw(self, key: str, payload: bytes, encoding: str) -> None:
+    def put_raw(
+        self, key: str, payload: bytes, encoding: str, attachment: bytes | None = None
+    ) -> None:
         """Publish bytes on any key, BLOCK congestion (replay must never drop)."""
         self.session.put(
             key,
@@ -183,6 +195,7 @@ class Bus:
             encoding=zenoh.Encoding(encoding),
             congestion_control=zenoh.CongestionControl.BLOCK,
             express=True,
+            attachment=attachment,
         )
 
     # ---- health and status ---------------------------------------------------------------

@@ -18,6 +18,7 @@ from services.registry import UnknownServiceError
 from services.replay.player import OutputCollector, Player
 from services.replay.resim import ResimError, resim
 from services.runtime.settings import SettingsError, parse_overrides
+from services.runtime.spec import answer_closure
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
@@ -97,11 +98,16 @@ def cmd_replay(args: argparse.Namespace) -> int:
     with bus:
         awaited: set[str] = set()
         collector = None
+        caused_by: dict[str, tuple[str, ...]] = {}
         if args.lockstep:
-            live_outputs = {t for s in bus.query_status() for t in s.spec.outputs}
+            specs = [s.spec for s in bus.query_status()]
+            live_outputs = {t for s in specs for t in s.outputs}
             awaited = (recorded & live_outputs) - published
             collector = OutputCollector(bus, awaited)
-        player = Player(bus, lambda t: t in published, awaited, collector, args.timeout)
+            caused_by = {t: answer_closure(t, specs) for t in published}
+        player = Player(
+            bus, lambda t: t in published, awaited, collector, args.timeout, caused_by=caused_by
+        )
         with Progress(transient=True) as bar:
             task = bar.add_task("replay", total=info.message_count)
             player.progress = lambda i: bar.update(task, completed=i + 1)

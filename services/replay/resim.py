@@ -18,7 +18,7 @@ from services.recorder.inspect import RecordingInfo, iter_messages, read_info
 from services.registry import SERVICE_MODULES, service_def
 from services.replay.player import OutputCollector, Player, PlayStats
 from services.runtime.lockstep import LockstepPlan
-from services.runtime.spec import answer_closure
+from services.runtime.spec import NodeSpec, answer_closure
 from services.supervisor.process import LogSink, ManagedProcess
 from services.supervisor.stack import deep_merge
 
@@ -95,12 +95,17 @@ def _recorded_settings(
     return out
 
 
+def _run_specs(info: RecordingInfo, names: list[str]) -> list[NodeSpec]:
+    """The specs of every service of the original run (recorded, or under resim now)."""
+    recorded = list(json.loads(info.run.get("specs", "{}")))
+    everyone = sorted({*recorded, *names} & set(SERVICE_MODULES))
+    return [service_def(n).spec for n in everyone]
+
+
 def _master_plan(info: RecordingInfo, master: str, names: list[str]) -> LockstepPlan:
     """The master waits for the answers of every service of the original run (recorded or
     now provided by the player) and for the other services under test to be live."""
-    recorded = list(json.loads(info.run.get("specs", "{}")))
-    everyone = sorted({*recorded, *names} & set(SERVICE_MODULES))
-    specs = [service_def(n).spec for n in everyone]
+    specs = _run_specs(info, names)
     wait = {t: answer_closure(t, specs) for t in service_def(master).spec.outputs}
     return LockstepPlan(
         wait={k: v for k, v in wait.items() if v}, consumers=tuple(n for n in names if n != master)
@@ -153,7 +158,10 @@ def resim(
         bus.watch_health(on_health)
         collector = OutputCollector(bus, outputs)
         svc_bus = bus_args(BusSettings(mode="client", connect=(endpoint,), namespace=ns))
-        for d in [d for d in defs if d.kind != "source"] + [d for d in defs if d.kind == "source"]:
+        defs_started = [d for d in defs if d.kind != "source"] + [
+            d for d in defs if d.kind == "source"
+        ]
+        for d in defs_started:
             argv = [
                 sys.executable,
                 "-m",
@@ -176,14 +184,24 @@ def resim(
             # not dead: nothing more will come from it.
             return all(p.running() or p.poll() == 0 for p in procs)
 
+        producer = {t: p for d, p in zip(defs_started, procs, strict=True) for t in d.spec.outputs}
+
+        def producing(topic: str) -> bool:
+            # Never wait for an output whose service is gone (finished or dead): it cannot come.
+            p = producer.get(topic)
+            return alive() and (p is None or p.running())
+
+        specs = _run_specs(info, names)
+
         player = Player(
             bus,
             lambda t: t in listened,
             set(outputs),
             collector,
             timeout_s,
-            alive,
+            producing,
             progress=(lambda i: progress(i, info.message_count)) if progress else None,
+            caused_by={t: answer_closure(t, specs) for t in listened},
         )
         stats = player.run(iter_messages(path), speed=None)
         if not alive():

@@ -34,6 +34,12 @@ class LockstepPlan(BaseModel):
         "clock this long at most, so nothing is published it would miss; then the run goes on "
         "without it until it is back (0: never pause), s.",
     )
+    causal_wait_s: float = Field(
+        default=5.0,
+        gt=0,
+        description="Consumer: an input waits this long at most for a causal predecessor that "
+        "has not arrived (one lost with a killed router); then it is handled without it, s.",
+    )
 
 
 class LockstepStall(RuntimeError):
@@ -52,6 +58,7 @@ class AnswerBarrier:
         self._expected: Counter[tuple[str, int]] = Counter()
         self._received: Counter[tuple[str, int]] = Counter()
         self._seen: set[tuple[str, int, int]] = set()  # (topic, stamp, seq) already counted
+        self._noted: list[tuple[str, int, int]] = []  # answers with a seq since take_noted()
         self._cv = threading.Condition()
         self.stalls = 0
 
@@ -75,8 +82,16 @@ class AnswerBarrier:
                 if key in self._seen:
                     return
                 self._seen.add(key)
+                self._noted.append(key)
             self._received[(topic, stamp_ns)] += 1
             self._cv.notify_all()
+
+    def take_noted(self) -> list[tuple[str, int, int]]:
+        """The (topic, stamp, seq) of the answers noted since the last call (and forget them):
+        the causal predecessors of the next group the master publishes."""
+        with self._cv:
+            out, self._noted = self._noted, []
+            return out
 
     def missing(self) -> list[tuple[str, int]]:
         with self._cv:

@@ -1,8 +1,11 @@
 """The thin process around a pure core: inputs from the bus, one worker thread, outputs, status.
 
 Every input is decoded on a Zenoh thread, checked for order, queued, and handed to the core on
-one worker thread in arrival order. With all services as clients of one router, arrival order
-is causal order, which is what makes lock-step runs byte-identical.
+one worker thread in arrival order. Zenoh keeps order per publisher only, so in lock-step every
+message carries its causal predecessors (``causal.py``): an input waits in the queue until the
+predecessors on this service's inputs have arrived, and those are handed first. What a step
+consumes is then fixed by the graph, not by the router's timing: lock-step runs are
+byte-identical.
 
 In lock-step a service answers a repeat of the input it answered last (the master re-sends a
 stalled tick) by publishing its answer again, byte for byte, without calling the core: a
@@ -24,6 +27,15 @@ from typing import Any, Literal, Protocol
 from schemas.service import ServiceState, ServiceStatus
 from services import __version__
 from services.bus import Bus, BusSettings
+from services.runtime.causal import (
+    NO_CAUSES,
+    CausalGate,
+    Causes,
+    Dep,
+    decode_after,
+    encode_after,
+    next_in_order,
+)
 from services.runtime.lockstep import AnswerBarrier, LockstepPlan, LockstepStall, LockstepStopped
 from services.runtime.spec import NodeSpec
 
@@ -32,6 +44,7 @@ log = logging.getLogger("node")
 Output = tuple[str, Any]
 Mode = Literal["lockstep", "live"]
 _REANSWER = "\x00reanswer"  # queue marker: publish the cached answer to (topic, seq) again
+Queued = tuple[str, Any, Causes]  # (topic, message, its causes)
 
 
 class Core(Protocol):
@@ -137,10 +150,16 @@ class Node:
         self.state: ServiceState = "starting"
         self.errors = 0
         self.stop_event = threading.Event()
-        self._queue: deque[Output] = deque()
+        self._queue: deque[Queued] = deque()
+        self._gate = CausalGate(spec.inputs)
+        self._held_since: float | None = None  # when the queue's head started waiting
+        self.causal_timeouts = 0
+        self._group_attachment: bytes | None = None  # master: of the group last published
+        self._noted_before: list[Dep] = []  # master: the answers attached the group before
         self._cv = threading.Condition()
         self._order = InputOrder()
-        self._answered: dict[str, tuple[int, Sequence[Output]]] = {}  # topic → (seq, outputs)
+        # topic → (seq, outputs, attachment): a repeat is answered byte for byte
+        self._answered: dict[str, tuple[int, Sequence[Output], bytes | None]] = {}
         self._live: set[str] = set()  # consumers whose liveliness is present (clock master)
         self._given_up: set[str] = set()  # consumers left behind after consumer_wait_s
         self._health_cv = threading.Condition()
@@ -152,7 +171,7 @@ class Node:
         listen = set(spec.inputs) | (self.barrier.topics if self.barrier else set())
         for key in sorted(listen):
             if key != "**":
-                self.bus.subscribe(key, self._on_input)
+                self.bus.subscribe(key, self._on_input, with_attachment=True)
         self.bus.serve_status(self.status)
 
     # ---- lifecycle -------------------------------------------------------------------------
@@ -186,9 +205,10 @@ class Node:
         )
 
     # ---- inputs ----------------------------------------------------------------------------
-    def _on_input(self, topic: str, msg: Any) -> None:
+    def _on_input(self, topic: str, msg: Any, attachment: bytes | None = None) -> None:
         header = msg.header
         is_input = topic in self.spec.inputs
+        causes = decode_after(attachment) if self.mode == "lockstep" else NO_CAUSES
         with self._cv:
             if is_input:
                 repeat = self._order.repeat(topic, header.seq, header.stamp_ns)
@@ -196,12 +216,13 @@ class Node:
                 if problem:
                     self.bus.reject(topic, problem)
                     if repeat and self._reanswers(topic):
-                        self._queue.append((_REANSWER, (topic, header.seq)))
+                        self._queue.append((_REANSWER, (topic, header.seq), NO_CAUSES))
                         self._cv.notify_all()
                     return
                 if self.mode == "live" and topic in self.spec.conflate:
                     self._drop_pending(topic)
-                self._queue.append((topic, msg))
+                self._gate.arrived(topic, header.stamp_ns, header.seq)
+                self._queue.append((topic, msg, causes))
                 self._cv.notify_all()
         if self.barrier is not None:
             self.barrier.note(topic, header.stamp_ns, header.seq)
@@ -217,26 +238,70 @@ class Node:
             self._queue.clear()
             self._queue.extend(kept)
 
-    def next_input(self, timeout_s: float | None = None) -> Output | None:
-        """The oldest pending input, waiting up to ``timeout_s``; None on stop or timeout."""
+    def next_queued(self, timeout_s: float | None = None) -> Queued | None:
+        """Normally the oldest input; but one whose predecessors have not all arrived waits, and
+        a predecessor queued behind it goes first."""
         with self._cv:
-            if not self._queue and not self.stop_event.is_set():
+            i = self._ready_index()
+            if i is None and not self.stop_event.is_set():
                 self._cv.wait(timeout=timeout_s)
-            return self._queue.popleft() if self._queue else None
+                i = self._ready_index()
+            if i is None:
+                return None
+            self._held_since = None
+            item = self._queue[i]
+            del self._queue[i]
+            return item
+
+    def _ready_index(self) -> int | None:
+        """Index of the input to hand now (under ``_cv``); None while the next one in causal
+        order waits for a predecessor (at most ``causal_wait_s``)."""
+        while self._queue:
+            view = [
+                None if t == _REANSWER else (t, m.header.stamp_ns, m.header.seq, c.after)
+                for t, m, c in self._queue
+            ]
+            i, missing = next_in_order(view, self._gate)
+            if not missing:
+                return i
+            topic, msg, _ = self._queue[i]
+            if not self._give_up_waiting(topic, msg, missing):
+                return None
+            self._queue[i] = (topic, msg, NO_CAUSES)
+        return None
+
+    def _give_up_waiting(self, topic: str, msg: Any, missing: list[Dep]) -> bool:
+        """A predecessor that never comes (lost with a killed router) must not hang us."""
+        now = time.monotonic()
+        if self._held_since is None:
+            self._held_since = now
+        if now - self._held_since < self.plan.causal_wait_s:
+            return False
+        self.causal_timeouts += 1
+        log.warning(
+            "%s seq %s: predecessors %s did not arrive in %.1f s; handled without them",
+            topic,
+            msg.header.seq,
+            missing,
+            self.plan.causal_wait_s,
+        )
+        self._held_since = None
+        return True
 
     def drain(self) -> list[Output]:
         with self._cv:
-            items = list(self._queue)
+            items = [(t, m) for t, m, _ in self._queue]
             self._queue.clear()
             return items
 
     # ---- outputs ---------------------------------------------------------------------------
-    def publish(self, outputs: Sequence[Output]) -> None:
+    def publish(self, outputs: Sequence[Output], attachment: bytes | None = None) -> None:
+        """Publish outputs; ``attachment``: their causal predecessors (lock-step)."""
         for topic, msg in outputs:
             pub = self._pubs.get(topic)
             if pub is None:
                 raise RuntimeError(f"{self.name} published undeclared topic {topic!r}")
-            pub.put(msg)
+            pub.put(msg, attachment)
 
     def call(self, fn: Any, topic: str, msg: Any) -> Sequence[Output]:
         """Run a core handler; an exception is counted and logged once per kind, never fatal."""
@@ -264,7 +329,7 @@ class Node:
         done = getattr(core, "done", None)
         while not self.stop_event.is_set():
             wait_s = 0.2 if timer is None else min(0.2, max(0.0, next_due - time.monotonic()))
-            item = self.next_input(timeout_s=wait_s)
+            item = self.next_queued(timeout_s=wait_s)
             if item is not None:
                 self._handle(core, *item)
                 if done is not None and done():
@@ -277,19 +342,24 @@ class Node:
                 next_due = max(next_due + period_s, time.monotonic())
                 self.publish(self._call_timer(fn))
 
-    def _handle(self, core: Core, topic: str, msg: Any) -> None:
-        """One input: the core's outputs are published (and kept, to answer a repeat)."""
+    def _handle(self, core: Core, topic: str, msg: Any, causes: Causes = NO_CAUSES) -> None:
+        """One input: the core's outputs are published (and kept, to answer a repeat). In
+        lock-step they carry the input's predecessors, its group and the input itself."""
         if topic == _REANSWER:
             key, seq = msg
             done = self._answered.get(key)
             if done is not None and done[0] == seq:
                 log.info("%s seq %d came again (re-sent tick): answer published again", key, seq)
-                self.publish(done[1])
+                self.publish(done[1], done[2])
             return
         outputs = self.call(core.handle, topic, msg)
-        self.publish(outputs)
+        attachment = None
+        if self.mode == "lockstep":
+            answered = (topic, msg.header.stamp_ns, msg.header.seq)
+            attachment = encode_after(causes.of_answer(answered))
+        self.publish(outputs, attachment)
         if self._reanswers(topic):
-            self._answered[topic] = (msg.header.seq, outputs)
+            self._answered[topic] = (msg.header.seq, outputs, attachment)
 
     def _call_timer(self, fn: Any) -> Sequence[Output]:
         """Run the core's timer; an exception is counted and logged once, never fatal."""
@@ -328,9 +398,18 @@ class Node:
         self._feed(core)
 
     def _publish_group(self, group: Sequence[Output]) -> None:
-        self.publish(group)
         if self.barrier is None:
+            self.publish(group)
             return
+        # The answers awaited since the previous group caused this one: consumers take them
+        # first. Those of the group before are added: a consumer that does not take the
+        # answers between (the controller, no camera frames) still waits for the older ones.
+        noted = self.barrier.take_noted()
+        group_deps = [(t, m.header.stamp_ns, m.header.seq) for t, m in group]
+        attachment = encode_after([*self._noted_before, *noted], group_deps)
+        self._noted_before = noted
+        self._group_attachment = attachment
+        self.publish(group, attachment)
         for topic, msg in group:
             self.barrier.expect(topic, msg.header.stamp_ns)
         try:
@@ -350,7 +429,7 @@ class Node:
             "lock-step: %s; re-publishing the tick",
             self._describe_missing(self.barrier.missing() if self.barrier else []),
         )
-        self.publish(group)
+        self.publish(group, self._group_attachment)
 
     def _describe_missing_now(self, missing: list[tuple[str, int]]) -> str:
         """The stall message; on stop, only the missing answers (no liveliness query)."""

@@ -1,7 +1,7 @@
 """The whole harvest as real processes (sim → detector → tracker → scene → planner → controller
 → sim) under the supervisor, in lock-step, recorded: a one-fruit tree is harvested; two runs of
 the same scenario and seed are byte-identical on every topic; resim of every service on the
-recording reproduces every output (two groups: the perception chain, the control loop).
+recording reproduces every output (the control loop alone, and all five services at once).
 (Slow: ~1 min per run on 2 cores.)"""
 
 from __future__ import annotations
@@ -81,29 +81,20 @@ def test_two_runs_are_byte_identical_on_every_topic(runs: tuple[Path, Path]) -> 
         assert diff is None, f"{topic}: message {diff} differs"
 
 
-CONTROL_RESIM_RACE = (
-    "known defect (issue 7 left open): resim of controller + planner on a whole-chain recording "
-    "now and then differs on one control/status in thousands (a delivery-order race between "
-    "the player's joint states and the resimmed planner's targets) and was seen to stall the "
-    "player; robot/command, plan/target and events were identical in every run"
-)
-
-
 @pytest.mark.parametrize(
     "group",
     [
-        ("detector", "tracker", "scene"),
-        pytest.param(("controller", "planner"), marks=pytest.mark.skip(reason=CONTROL_RESIM_RACE)),
+        ("controller", "planner"),
+        ("detector", "tracker", "scene", "controller", "planner"),
     ],
-    ids=["perception", "control"],
+    ids=["control", "all"],
 )
 def test_resim_of_every_service_is_identical(
     runs: tuple[Path, Path], group: tuple[str, ...]
 ) -> None:
-    # Every service is resimmed, in two groups: the perception chain on the recorded frames, the
-    # control loop on the recorded scene states. (All five at once: the controller may take a
-    # joint state from the player before the resimmed scene's state of the same tick — a
-    # delivery-order race the live run does not have; see the issue notes.)
+    # The control loop on the recorded scene states, and all five at once: the perception chain
+    # on the recorded frames (its own group before, now a part of this one), the controller and
+    # planner on the resimmed scene's states (each input waits for its causal predecessors).
     report = resim(runs[0], list(group), timeout_s=60.0)
     assert report.ok and report.identical_ratio == 1.0, report.to_json()
     by = {t.topic: t for t in report.topics}
