@@ -116,6 +116,15 @@ class ManagedProcess:
         """Exit code once the process has ended, else None."""
         return self.proc.poll() if self.proc is not None else None
 
+    def wait_exit(self, timeout_s: float) -> int | None:
+        """Exit code if the process ends within ``timeout_s``, else None."""
+        if self.proc is None:
+            return None
+        try:
+            return self.proc.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            return None
+
     def running(self) -> bool:
         return self.proc is not None and self.proc.poll() is None
 

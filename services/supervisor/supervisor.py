@@ -68,8 +68,10 @@ class Supervisor:
         python: str = sys.executable,
         hung_grace_s: float = 0.3,
         follow_grace_s: float = 5.0,
+        exit_grace_s: float = 0.5,
     ) -> None:
         self.stack, self.stack_path, self.run_id, self.profile = stack, stack_path, run_id, profile
+        self.exit_grace_s = exit_grace_s
         self.python, self.follow_grace_s = python, follow_grace_s
         self.namespace = f"harvest/{run_id}"
         rec_dir = stack.recording.dir
@@ -302,17 +304,22 @@ class Supervisor:
             return None
         rc = child.proc.poll()
         if rc is None:
-            if self.health.hung(child, now):
-                if self._answers(name, child):
-                    # A link that dropped and is being re-dialled (a loaded machine can miss a
-                    # lease): the process still answers, so it is not hung. Judge again later.
-                    self.say(f"{name} lost its liveliness but answers its status: not hung")
-                    child.lost_at = time.monotonic()
-                    return None
+            if not self.health.hung(child, now):
+                return None
+            if self._answers(name, child):
+                # A link that dropped and is being re-dialled (a loaded machine can miss a
+                # lease): the process still answers, so it is not hung. Judge again later.
+                self.say(f"{name} lost its liveliness but answers its status: not hung")
+                child.lost_at = time.monotonic()
+                return None
+            # A service that finished drops its liveliness and its status before its process
+            # ends (interpreter teardown, slow under load): a process that exits now was not hung.
+            rc = child.proc.wait_exit(self.exit_grace_s)
+            if rc is None:
                 self.say(f"{name} lost its liveliness while its process runs: hung, killing it")
                 child.proc.signal(signal.SIGKILL)
                 child.was_alive = False
-            return None
+                return None
         child.proc.exit_codes.append(rc)
         if rc == 0:
             child.done = True

@@ -108,3 +108,26 @@ def test_lost_liveliness_with_a_status_answer_is_not_hung(tmp_path: Path) -> Non
     sup.bus = _FakeBus([])  # type: ignore[assignment]
     assert not sup._answers("demo_worker", c)
     sup.sink.close()
+
+
+def test_a_service_that_exits_after_dropping_its_liveliness_is_not_killed(tmp_path: Path) -> None:
+    """A finished service's token and status go before its process ends (teardown is slow under
+    load): the supervisor must see the normal exit, not kill a 'hung' process."""
+    import time
+
+    from services.supervisor.stack import load_stack
+    from services.supervisor.supervisor import Supervisor
+
+    (tmp_path / "s.yaml").write_text(
+        "name: t\nmode: lockstep\nmaster: demo_clock\n"
+        f"recording: {{dir: {tmp_path}}}\n"
+        "services:\n  demo_worker: {}\n  demo_clock: {main: true}\n"
+    )
+    sup = Supervisor(load_stack(tmp_path / "s.yaml"), tmp_path / "s.yaml", "r", quiet=True)
+    sup.bus = _FakeBus([])  # type: ignore[assignment]  # nobody answers the status query
+    c = Child(ManagedProcess("x", ["sleep", "0.3"], LogSink()), RestartPolicy())
+    c.proc.start()
+    c.was_alive, c.lost_at = True, time.monotonic() - 10.0  # its token went long ago
+    assert sup._check_child("demo_worker", c) is None
+    assert c.proc.exit_codes == [0] and c.done and not c.failed
+    sup.sink.close()
