@@ -14,6 +14,11 @@
    Mahalanobis gate nor IoU accepts that jump, and Deep SORT would start a new ID for it. A
    detection larger than ``max_containment_growth`` times the largest box the track ever had
    is not taken (a hand's box contains the fruit it covers).
+   (Ours, every stage) A track unseen for more than one frame is taken up again only by a
+   box within ``max_coast_shift_h`` of its last box's heights from where it was last seen
+   and within ``max_coast_depth_jump_m`` of its depth: fruit hang still, while the Kalman
+   covariance of a coasting track grows without bound (after 10 s its gate spans the image),
+   so the track of a harvested fruit would otherwise take the box of another fruit.
 5. Unmatched tracks are marked missed; unmatched detections start tentative tracks with IDs
    from this tracker's own counter (1, 2, ...).
 """
@@ -51,6 +56,8 @@ class TrackerParams:
     min_containment: float = 0.5
     max_containment_growth: float = 1.5
     coast_velocity_decay: float = 0.8
+    max_coast_shift_h: float = 1.0
+    max_coast_depth_jump_m: float = 0.1
 
 
 class Tracker:
@@ -107,7 +114,25 @@ class Tracker:
         bad = mahas > gate
         bad |= np.nan_to_num(app, nan=0.0) > self.p.max_cosine_distance
         bad |= self._depth_jumps(tis, depths)
+        bad |= self._coast_jumps(tis, zs, depths)
         return np.where(bad, INFTY_COST, cost)
+
+    def _coast_jumps(self, tis: Sequence[int], zs: np.ndarray, depths: np.ndarray) -> np.ndarray:
+        """(T, N) True where the track is coasting (unseen for more than one frame) and the
+        detection (xyah rows ``zs``) lies farther from its last matched box than
+        ``max_coast_shift_h`` of that box's heights, or off its depth by more than
+        ``max_coast_depth_jump_m`` (both known)."""
+        last = np.stack([self.tracks[t].last_xyah for t in tis])  # (T, 4)
+        coasting = np.array([self.tracks[t].time_since_update > 1 for t in tis])
+        shift_px = np.linalg.norm(zs[None, :, :2] - last[:, None, :2], axis=2)
+        far = shift_px > self.p.max_coast_shift_h * last[:, 3:4]
+        td = np.array(
+            [np.nan if self.tracks[t].depth_m is None else self.tracks[t].depth_m for t in tis]
+        )
+        with np.errstate(invalid="ignore"):
+            jump = np.abs(td[:, None] - depths[None, :])
+        far |= np.nan_to_num(jump, nan=0.0) > self.p.max_coast_depth_jump_m
+        return far & coasting[:, None]
 
     def _depth_jumps(self, tis: Sequence[int], depths: np.ndarray) -> np.ndarray:
         """(T, N) True where both depths are known and differ by more than the gate."""
@@ -145,7 +170,8 @@ class Tracker:
             # beyond: a box much larger than any this track had is something else (the hand
             # that covers the fruit), not the fruit.
             cost[r, area > self.p.max_containment_growth * t.max_area_px] = INFTY_COST
-        return np.where(self._depth_jumps(tis, depths), INFTY_COST, cost)
+        bad = self._depth_jumps(tis, depths) | self._coast_jumps(tis, xyxy_to_xyah(boxes), depths)
+        return np.where(bad, INFTY_COST, cost)
 
     def _match(self, dets: Sequence[Measurement]):
         confirmed = [i for i, t in enumerate(self.tracks) if t.confirmed]
