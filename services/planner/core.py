@@ -141,6 +141,9 @@ class PlannerCore:
         if self.pending_scene is not None:
             self.book.update(self.pending_scene, self._in_dish)
             self.pending_scene = None
+            for old, new, fid in self.book.reborn:
+                log.info("track ID %d left fruit %d: another fruit (record %d)", fid, old, new)
+            self.book.reborn.clear()
         contacts = self.contacts
         self._count_contacts(st)
         m = self.machine
