@@ -97,7 +97,7 @@ class FruitBook:
             f = now[fid]
             key = self.id_to_key.get(fid)
             if key is not None and self._reused(self.records[key], f, in_dish):
-                key = self._reborn(self.records[key], f)
+                key = self._reborn(self.records[key], f, now)
             if key is None:
                 key = self._identify(f, now)
             rec = self.records[key]
@@ -110,24 +110,24 @@ class FruitBook:
         for key in sorted(self.records):
             self.records[key].in_scene = key in present
 
-    def _identify(self, f: Fruit, now: dict[int, Fruit]) -> int:
-        """The record a new track ID belongs to (a new record if none)."""
+    def _identify(self, f: Fruit, now: dict[int, Fruit], new_key: int | None = None) -> int:
+        """The record a track ID new to it belongs to: any record within ``same_fruit_m`` (two
+        fruit centres are never that close: each fruit is at least 7 cm across), else a new
+        record keyed ``new_key`` (default: the ID)."""
         p = np.array(f.position_world_m, float)
         for key in sorted(self.records):
             rec = self.records[key]
             if np.linalg.norm(rec.planned.centre_world_m - p) > self.same_fruit_m:
                 continue
-            current = now.get(rec.fruit_id)
-            taken_over = current is None or current.frames_unseen > f.frames_unseen
-            if rec.finished or taken_over:
-                self.id_to_key[f.fruit_id] = key
-                rec.ids.append(f.fruit_id)
-                return key
-        self.records[f.fruit_id] = FruitRecord(
-            f.fruit_id, f.fruit_id, [f.fruit_id], f, shape_of(f), planned_whole=_whole(f)
+            self.id_to_key[f.fruit_id] = key
+            rec.ids.append(f.fruit_id)
+            return key
+        key = f.fruit_id if new_key is None else new_key
+        self.records[key] = FruitRecord(
+            key, f.fruit_id, [f.fruit_id], f, shape_of(f), planned_whole=_whole(f)
         )
-        self.id_to_key[f.fruit_id] = f.fruit_id
-        return f.fruit_id
+        self.id_to_key[f.fruit_id] = key
+        return key
 
     def _reused(self, rec: FruitRecord, f: Fruit, in_dish: Callable[[Fruit], bool]) -> bool:
         """``f`` (an ID of ``rec``) is fresh and far from ``rec``'s fruit, which is finished or
@@ -144,15 +144,16 @@ class FruitBook:
         fallen = rec.outcome == "dropped" and p[2] < c[2] - self.same_fruit_m
         return not fallen
 
-    def _reborn(self, rec: FruitRecord, f: Fruit) -> int:
-        """A new record for ``f``, whose ID leaves ``rec`` (negative keys: never a track ID)."""
-        key = min(0, *self.records) - 1
+    def _reborn(self, rec: FruitRecord, f: Fruit, now: dict[int, Fruit]) -> int:
+        """``f``'s ID leaves ``rec`` for the record of the fruit it is on now: a known one, or a
+        new one (negative keys: never a track ID). The scene's mark on the ID is the old
+        fruit's: that record no longer trusts scene marks (they only echo the planner's own
+        outcomes, which it keeps)."""
         rec.ids.remove(f.fruit_id)
-        self.records[key] = FruitRecord(
-            key, f.fruit_id, [f.fruit_id], f, shape_of(f), planned_whole=_whole(f)
-        )
-        self.records[key].scene_mark_ok = False
-        self.id_to_key[f.fruit_id] = key
+        del self.id_to_key[f.fruit_id]
+        fresh = min(0, *self.records) - 1
+        key = self._identify(f, now, fresh)
+        self.records[key].scene_mark_ok = False  # the planner's own outcomes suffice
         self.reborn.append((rec.key, key, f.fruit_id))
         return key
 

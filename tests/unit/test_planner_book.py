@@ -57,6 +57,16 @@ def test_a_new_id_beside_a_visible_fruit_is_another_fruit() -> None:
     assert sorted(b.records) == [3, 4]
 
 
+def test_a_second_id_on_a_visible_fruit_is_the_same_fruit_not_a_neighbour() -> None:
+    # The tracker holds two tracks on one fruit (both fresh, 1.5 cm apart): one record, or the
+    # duplicate would stand in its own tools' way (paper-exp2: "blocked", then unreachable).
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    b.update(scene(fruit(3, (0.6, 0.0, 1.3))), never)
+    b.update(scene(fruit(3, (0.6, 0.0, 1.3)), fruit(8, (0.61, 0.01, 1.3))), never)
+    assert list(b.records) == [3] and b.records[3].ids == [3, 8]
+    assert b.records[3].fruit_id == 3 and b.switches == []  # the current ID is as fresh
+
+
 def test_a_stale_duplicate_of_a_finished_fruit_is_never_a_candidate() -> None:
     b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
     b.update(scene(fruit(3, (0.6, 0.0, 1.3))), never)
