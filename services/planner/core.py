@@ -49,6 +49,7 @@ class PlannerCore:
                 s.approach_basket_drop_m,
                 self.kin.camera_axis_world,
                 s.dish_back_m,
+                s.dish_catch_margin_m,
             ),
         )
         self.stamper = Stamper(NAME)
