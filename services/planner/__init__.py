@@ -59,6 +59,15 @@ class Settings(ServiceSettings):
         "towards the robot (along the cutter's pointing axis): a falling 4 cm fruit still lands "
         "in the 8.5 cm dish, and fruit hanging behind and below stay out of its way, m.",
     )
+    dish_catch_margin_m: float = Field(
+        default=0.03,
+        ge=0,
+        le=0.06,
+        description="dish_back_m is cut down so that the falling fruit's edge stays this far "
+        "inside the dish rim (8.5 cm radius − d_h − this): the fruit's estimate is off by 1–2 cm "
+        "and it bounces; a 3.9 cm fruit with the dish 3 cm back (3.4 cm measured) fell on the rim "
+        "and out (paper-exp1), m.",
+    )
     approach_basket_drop_m: float = Field(
         default=0.05,
         ge=0,

@@ -5,6 +5,12 @@ list, with the identity rules the harvest needs.
   that is finished, or that is not seen now while the new ID is, is that record (a tracker ID
   switch, or a stale duplicate of a fruit already dealt with): the record takes the new ID and
   keeps the old ones (all of them are ignored together by the controller while cutting).
+* A track ID is another fruit once it is seen, fresh, farther than ``same_fruit_m`` from its
+  record when that record is finished (the fruit was harvested or given up) or has moved on to
+  a newer ID: the tracker re-attached the track of a fruit that is gone to another fruit's box.
+  The ID leaves the old record and starts a new one (a fresh negative key; the scene's mark on
+  that ID is about the old fruit and is not trusted for it). A fruit seen in our dish, or a
+  dropped fruit seen lower than where it was cut, is that fruit: not a new one.
 * A fruit last seen inside the robot's own dish is not a fruit on the tree (a collected fruit
   seen in the basket): it is marked ``in_basket`` and never selected.
 * The planning position of a record changes only when the estimate moves more than
@@ -55,6 +61,7 @@ class FruitRecord:
     losses: int = 0
     frozen: bool = False  # cutting or leaving: the planning position no longer follows the scene
     planned_whole: bool = False  # ``planned`` comes from a whole view (no side cut, fresh)
+    scene_mark_ok: bool = True  # False: its ID was another fruit's, whose scene mark it carries
     reach: tuple[ReachVerdict, ReachVerdict] | None = None  # harvest pose, pre-pose
 
     @property
@@ -80,6 +87,7 @@ class FruitBook:
     dish_at: dict[int, DishPose] = field(default_factory=dict)  # camera stamp → dish
     switches: list[tuple[int, int, int]] = field(default_factory=list)  # (key, old, new)
     moved: list[tuple[int, float]] = field(default_factory=list)  # (key, metres)
+    reborn: list[tuple[int, int, int]] = field(default_factory=list)  # (old key, new key, ID)
 
     def update(self, scene: SceneState, in_dish: Callable[[Fruit], bool]) -> None:
         """Take one scene state: new IDs, switches, positions, what is in the scene now."""
@@ -88,6 +96,8 @@ class FruitBook:
         for fid in sorted(now):
             f = now[fid]
             key = self.id_to_key.get(fid)
+            if key is not None and self._reused(self.records[key], f, in_dish):
+                key = self._reborn(self.records[key], f, now)
             if key is None:
                 key = self._identify(f, now)
             rec = self.records[key]
@@ -100,24 +110,52 @@ class FruitBook:
         for key in sorted(self.records):
             self.records[key].in_scene = key in present
 
-    def _identify(self, f: Fruit, now: dict[int, Fruit]) -> int:
-        """The record a new track ID belongs to (a new record if none)."""
+    def _identify(self, f: Fruit, now: dict[int, Fruit], new_key: int | None = None) -> int:
+        """The record a track ID new to it belongs to: any record within ``same_fruit_m`` (two
+        fruit centres are never that close: each fruit is at least 7 cm across), else a new
+        record keyed ``new_key`` (default: the ID)."""
         p = np.array(f.position_world_m, float)
         for key in sorted(self.records):
             rec = self.records[key]
             if np.linalg.norm(rec.planned.centre_world_m - p) > self.same_fruit_m:
                 continue
-            current = now.get(rec.fruit_id)
-            taken_over = current is None or current.frames_unseen > f.frames_unseen
-            if rec.finished or taken_over:
-                self.id_to_key[f.fruit_id] = key
-                rec.ids.append(f.fruit_id)
-                return key
-        self.records[f.fruit_id] = FruitRecord(
-            f.fruit_id, f.fruit_id, [f.fruit_id], f, shape_of(f), planned_whole=_whole(f)
+            self.id_to_key[f.fruit_id] = key
+            rec.ids.append(f.fruit_id)
+            return key
+        key = f.fruit_id if new_key is None else new_key
+        self.records[key] = FruitRecord(
+            key, f.fruit_id, [f.fruit_id], f, shape_of(f), planned_whole=_whole(f)
         )
-        self.id_to_key[f.fruit_id] = f.fruit_id
-        return f.fruit_id
+        self.id_to_key[f.fruit_id] = key
+        return key
+
+    def _reused(self, rec: FruitRecord, f: Fruit, in_dish: Callable[[Fruit], bool]) -> bool:
+        """``f`` (an ID of ``rec``) is fresh and far from ``rec``'s fruit, which is finished or
+        has a newer ID, and not in our dish (a harvested fruit is seen there): the tracker gave
+        the ID to another fruit."""
+        if f.frames_unseen > 0 or not (rec.finished or f.fruit_id != rec.fruit_id):
+            return False
+        if in_dish(f):
+            return False
+        p = np.array(f.position_world_m, float)
+        c = rec.planned.centre_world_m
+        if np.linalg.norm(p - c) <= self.same_fruit_m:
+            return False
+        fallen = rec.outcome == "dropped" and p[2] < c[2] - self.same_fruit_m
+        return not fallen
+
+    def _reborn(self, rec: FruitRecord, f: Fruit, now: dict[int, Fruit]) -> int:
+        """``f``'s ID leaves ``rec`` for the record of the fruit it is on now: a known one, or a
+        new one (negative keys: never a track ID). The scene's mark on the ID is the old
+        fruit's: that record no longer trusts scene marks (they only echo the planner's own
+        outcomes, which it keeps)."""
+        rec.ids.remove(f.fruit_id)
+        del self.id_to_key[f.fruit_id]
+        fresh = min(0, *self.records) - 1
+        key = self._identify(f, now, fresh)
+        self.records[key].scene_mark_ok = False  # the planner's own outcomes suffice
+        self.reborn.append((rec.key, key, f.fruit_id))
+        return key
 
     def _switch(self, rec: FruitRecord, new_id: int) -> None:
         self.switches.append((rec.key, rec.fruit_id, new_id))
@@ -153,7 +191,7 @@ class FruitBook:
             and r.in_scene
             and not r.in_basket
             and r.seen.frames_unseen <= max_unseen
-            and r.seen.status not in ("harvested", "unreachable")
+            and (r.seen.status not in ("harvested", "unreachable") or not r.scene_mark_ok)
         ]
         fresh = [r for r in ok if not r.deferred]
         return fresh or ok

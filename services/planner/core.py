@@ -49,6 +49,7 @@ class PlannerCore:
                 s.approach_basket_drop_m,
                 self.kin.camera_axis_world,
                 s.dish_back_m,
+                s.dish_catch_margin_m,
             ),
         )
         self.stamper = Stamper(NAME)
@@ -141,6 +142,9 @@ class PlannerCore:
         if self.pending_scene is not None:
             self.book.update(self.pending_scene, self._in_dish)
             self.pending_scene = None
+            for old, new, fid in self.book.reborn:
+                log.info("track ID %d left fruit %d: another fruit (record %d)", fid, old, new)
+            self.book.reborn.clear()
         contacts = self.contacts
         self._count_contacts(st)
         m = self.machine

@@ -62,6 +62,7 @@ def _record(r: FruitRecord) -> dict[str, Any]:
         "deferred": r.deferred,
         "cuts": r.cuts,
         "losses": r.losses,
+        "scene_mark_ok": r.scene_mark_ok,
     }
 
 
@@ -84,6 +85,7 @@ def _unrecord(d: dict[str, Any]) -> FruitRecord:
         cuts=d["cuts"],
         losses=d["losses"],
         planned_whole=d["planned_whole"],
+        scene_mark_ok=d.get("scene_mark_ok", True),
     )
 
 

@@ -60,6 +60,20 @@ class Settings(ServiceSettings):
         description="Factor on a track's velocity per frame while it is not seen (fruit hang "
         "still; 1 = Deep SORT's pure constant velocity).",
     )
+    max_shift_sides: float = Field(
+        default=1.0,
+        gt=0.0,
+        description="A confirmed track takes a box only within this many times the side of its "
+        "whole box (sqrt of the largest box area it matched) from its last matched box: fruit "
+        "hang still, and the Kalman gate of a track that coasted long spans the image (a "
+        "harvested fruit's track would take another fruit's box).",
+    )
+    max_depth_step_m: float = Field(
+        default=0.1,
+        gt=0.0,
+        description="A confirmed track takes a box only within this of its depth (when both are "
+        "known; cascade and containment stages), m.",
+    )
     frame_buffer: int = Field(
         default=8, ge=1, le=64, description="Camera frames kept to join with their detections."
     )

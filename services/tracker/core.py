@@ -76,6 +76,8 @@ class TrackerCore:
                 min_containment=settings.min_containment,
                 max_containment_growth=settings.max_containment_growth,
                 coast_velocity_decay=settings.coast_velocity_decay,
+                max_shift_sides=settings.max_shift_sides,
+                max_depth_step_m=settings.max_depth_step_m,
             )
         )
         self.stamper = Stamper("tracker")

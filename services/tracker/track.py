@@ -52,6 +52,7 @@ class Track:
         self.score = m.score
         self.depth_m = m.depth_m
         self.max_area_px = _area(m.xyxy_px)  # the largest box matched: the fruit's whole size
+        self.last_xyah = xyxy_to_xyah(m.xyxy_px)  # the last box matched, not the prediction
         self._n_init, self._max_age, self._alpha = n_init, max_age, depth_smoothing
 
     @property
@@ -80,6 +81,7 @@ class Track:
         self.gallery.add(m.feature)
         self.score = m.score
         self.max_area_px = max(self.max_area_px, _area(m.xyxy_px))
+        self.last_xyah = xyxy_to_xyah(m.xyxy_px)
         if m.depth_m is not None:
             # Depth from one box is noisy (leaf edges, fruit rim): smooth it.
             self.depth_m = (

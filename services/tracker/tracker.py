@@ -14,6 +14,12 @@
    Mahalanobis gate nor IoU accepts that jump, and Deep SORT would start a new ID for it. A
    detection larger than ``max_containment_growth`` times the largest box the track ever had
    is not taken (a hand's box contains the fruit it covers).
+   (Ours, cascade and containment) A confirmed track takes a box only within
+   ``max_shift_sides`` of its whole box's side from its last matched box and within
+   ``max_depth_step_m`` of its depth: fruit hang still, while the Kalman covariance of
+   a coasting track grows without bound (after 10 s its gate spans the image, and one
+   sighting does not shrink its velocity part), so the track of a harvested fruit would
+   otherwise take the box of another fruit.
 5. Unmatched tracks are marked missed; unmatched detections start tentative tracks with IDs
    from this tracker's own counter (1, 2, ...).
 """
@@ -51,6 +57,8 @@ class TrackerParams:
     min_containment: float = 0.5
     max_containment_growth: float = 1.5
     coast_velocity_decay: float = 0.8
+    max_shift_sides: float = 1.0
+    max_depth_step_m: float = 0.1
 
 
 class Tracker:
@@ -107,7 +115,27 @@ class Tracker:
         bad = mahas > gate
         bad |= np.nan_to_num(app, nan=0.0) > self.p.max_cosine_distance
         bad |= self._depth_jumps(tis, depths)
+        bad |= self._far_from_last(tis, zs, depths)
         return np.where(bad, INFTY_COST, cost)
+
+    def _far_from_last(self, tis: Sequence[int], zs: np.ndarray, depths: np.ndarray) -> np.ndarray:
+        """(T, N) True where the detection (xyah rows ``zs``) lies farther from the track's last
+        matched box than ``max_shift_sides`` times the side of the fruit's whole box (the
+        square root of the largest box area the track matched), or off its depth by more
+        than ``max_depth_step_m`` (both known). Also for a track seen in the last frame:
+        one sighting after a long coast leaves the velocity covariance huge, so the next
+        prediction's gate is still wide (paper-exp1: a harvested fruit's track, re-acquired on
+        a stray box where the fruit was, took the next fruit's box one frame later)."""
+        last = np.stack([self.tracks[t].last_xyah for t in tis])  # (T, 4)
+        side_px = np.sqrt([self.tracks[t].max_area_px for t in tis])  # the whole fruit's box
+        shift_px = np.linalg.norm(zs[None, :, :2] - last[:, None, :2], axis=2)
+        far = shift_px > self.p.max_shift_sides * side_px[:, None]
+        td = np.array(
+            [np.nan if self.tracks[t].depth_m is None else self.tracks[t].depth_m for t in tis]
+        )
+        with np.errstate(invalid="ignore"):
+            jump = np.abs(td[:, None] - depths[None, :])
+        return far | (np.nan_to_num(jump, nan=0.0) > self.p.max_depth_step_m)
 
     def _depth_jumps(self, tis: Sequence[int], depths: np.ndarray) -> np.ndarray:
         """(T, N) True where both depths are known and differ by more than the gate."""
@@ -145,7 +173,8 @@ class Tracker:
             # beyond: a box much larger than any this track had is something else (the hand
             # that covers the fruit), not the fruit.
             cost[r, area > self.p.max_containment_growth * t.max_area_px] = INFTY_COST
-        return np.where(self._depth_jumps(tis, depths), INFTY_COST, cost)
+        bad = self._depth_jumps(tis, depths) | self._far_from_last(tis, xyxy_to_xyah(boxes), depths)
+        return np.where(bad, INFTY_COST, cost)
 
     def _match(self, dets: Sequence[Measurement]):
         confirmed = [i for i, t in enumerate(self.tracks) if t.confirmed]

@@ -57,6 +57,16 @@ def test_a_new_id_beside_a_visible_fruit_is_another_fruit() -> None:
     assert sorted(b.records) == [3, 4]
 
 
+def test_a_second_id_on_a_visible_fruit_is_the_same_fruit_not_a_neighbour() -> None:
+    # The tracker holds two tracks on one fruit (both fresh, 1.5 cm apart): one record, or the
+    # duplicate would stand in its own tools' way (paper-exp2: "blocked", then unreachable).
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    b.update(scene(fruit(3, (0.6, 0.0, 1.3))), never)
+    b.update(scene(fruit(3, (0.6, 0.0, 1.3)), fruit(8, (0.61, 0.01, 1.3))), never)
+    assert list(b.records) == [3] and b.records[3].ids == [3, 8]
+    assert b.records[3].fruit_id == 3 and b.switches == []  # the current ID is as fresh
+
+
 def test_a_stale_duplicate_of_a_finished_fruit_is_never_a_candidate() -> None:
     b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
     b.update(scene(fruit(3, (0.6, 0.0, 1.3))), never)
@@ -107,3 +117,42 @@ def test_a_much_smaller_unflagged_view_does_not_move_a_target_planned_from_a_who
     assert b.moved == []
     b.update(scene(fruit(3, (0.75, 0.05, 1.25))), never)  # the same size, moved: re-planned
     assert np.allclose(r.planned.centre_world_m, (0.75, 0.05, 1.25)) and b.moved
+
+
+def test_the_id_of_a_harvested_fruit_seen_on_another_fruit_is_a_new_fruit() -> None:
+    # The tracker re-attached the track of a harvested fruit to another fruit's box, 30 cm away:
+    # that fruit is a candidate although the scene marks its ID harvested (the old fruit's mark).
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    b.update(scene(fruit(2, (0.587, -0.14, 1.31))), never)
+    b.records[2].outcome = "harvested"
+    other = fruit(2, (0.818, -0.30, 1.227)).model_copy(update={"status": "harvested"})
+    b.update(scene(other), never)
+    assert sorted(b.records) == [-1, 2]
+    new = b.records[-1]
+    assert new.fruit_id == 2 and not new.finished and b.candidates(45) == [new]
+    assert b.records[2].ids == [] and b.ignore_ids(None) == ()  # the new fruit is an obstacle
+    b.update(scene(other), never)  # and stays one record
+    assert sorted(b.records) == [-1, 2]
+
+
+def test_an_old_id_seen_on_another_fruit_does_not_take_the_target_there() -> None:
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    b.update(scene(fruit(5, (0.70, -0.25, 1.40))), never)
+    b.update(scene(fruit(5, (0.70, -0.25, 1.40), unseen=3), fruit(53, (0.70, -0.24, 1.39))), never)
+    assert b.records[5].fruit_id == 53
+    b.switches.clear()
+    # Track 5 comes back fresh on a fruit 20 cm away: not a switch back.
+    b.update(scene(fruit(5, (0.82, -0.30, 1.23)), fruit(53, (0.70, -0.24, 1.39))), never)
+    assert b.records[5].fruit_id == 53 and b.records[5].ids == [53] and b.switches == []
+    assert b.records[-1].fruit_id == 5 and [r.key for r in b.candidates(45)] == [-1, 5]
+
+
+def test_a_harvested_fruit_seen_in_the_dish_or_a_dropped_one_seen_fallen_is_not_new() -> None:
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    b.update(scene(fruit(2, (0.6, 0.0, 1.3)), fruit(3, (0.7, 0.1, 1.3))), never)
+    b.records[2].outcome, b.records[3].outcome = "harvested", "dropped"
+    b.update(
+        scene(fruit(2, (0.5, -0.1, 0.9)), fruit(3, (0.7, 0.1, 1.0))),
+        lambda f: f.fruit_id == 2,
+    )
+    assert sorted(b.records) == [2, 3] and b.candidates(45) == []

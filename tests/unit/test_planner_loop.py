@@ -122,6 +122,23 @@ def test_a_tracker_id_switch_mid_approach_keeps_the_same_fruit(tmp_path: Path) -
     assert not r.events("fruit_lost")
 
 
+def test_a_fruit_given_the_id_of_a_harvested_fruit_is_still_harvested(tmp_path: Path) -> None:
+    # The tracker re-attaches the track of a harvested fruit (A, ID 1) to a fruit it had never
+    # reported (B, hidden so far): B shows under ID 1, which the scene marks harvested.
+    def reuse(scene: TruthScene, truth: Any) -> None:
+        if truth.fruits[0].state != "attached":
+            scene.relabel[1] = 1
+
+    r = run_harvest(
+        lab_scenario(tmp_path, [A, B]), scene=TruthScene(hidden={2}, on_frame=reuse), max_s=30
+    )
+    check_loop_invariants(r)
+    assert len(r.sim_events("collected")) == 2  # the sim: both fruit in the basket
+    assert [e.fruit_id for e in r.events("fruit_collected")] == [1, 1]
+    s = r.summary()
+    assert (s.detected, s.harvested) == (2, 2)
+
+
 def test_a_failing_cut_is_retried_once_then_the_fruit_is_given_up(tmp_path: Path) -> None:
     # A 1 mm cut tolerance: the tip (within 4 mm of the peduncle) misses every time.
     r = run_harvest(lab_scenario(tmp_path, [A]), sim={"cut_tolerance_m": 0.001}, max_s=25)

@@ -72,3 +72,14 @@ def test_a_neighbour_where_the_dish_or_the_cutter_goes_blocks_a_fruit() -> None:
     got = blockers(top, [under, beside, behind, in_front], P, 0.02)
     assert got == [0, 3]
     assert blockers(beside, [top, under, behind], P, 0.02) == []
+
+
+@pytest.mark.parametrize("d_h_m", [0.035, 0.039, 0.044, 0.05])
+def test_the_dish_back_offset_keeps_the_falling_fruit_inside_the_rim(d_h_m: float) -> None:
+    # Paper-exp1: the dish 3 cm back (3.4 cm with the estimate's error) under a 3.9 cm fruit:
+    # it fell on the rim and out. The offset leaves the fruit's edge the catch margin inside.
+    p = PoseSettings(0.03, 0.12, 0.01, 0.05, AXIS, dish_back_m=0.03, dish_catch_margin_m=0.03)
+    back = harvest_pose(FruitShape(F.centre_world_m, d_h_m, 0.038), p).basket_back_m
+    assert 0.0 <= back <= 0.03
+    assert back + d_h_m + 0.03 <= TOOLS.basket_radius_m + 1e-9
+    assert back == pytest.approx(min(0.03, TOOLS.basket_radius_m - d_h_m - 0.03))
