@@ -98,3 +98,12 @@ def test_without_the_spheres_the_same_target_is_reached() -> None:
         600,
     )
     assert res.converged_tick is not None
+
+
+def test_the_bench_case_with_spheres_brings_spheres_past_the_broad_phase() -> None:
+    from services.controller.bench import cycle_times
+
+    plain = cycle_times(10, 30, seed=1, settings=SETTINGS)
+    with_spheres = cycle_times(10, 30, seed=1, settings=SETTINGS, n_spheres=60)
+    assert with_spheres["ticks"] == 30
+    assert with_spheres["obstacles_near_mean"] > plain["obstacles_near_mean"]
