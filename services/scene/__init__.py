@@ -251,7 +251,7 @@ class Settings(ServiceSettings):
         "scenes over its max_obstacles (500) with the fruit and the trunk.",
     )
     occupancy_target_clearance_m: float = Field(
-        default=0.1,
+        default=0.2,
         ge=0,
         le=1,
         description="No sphere comes within d_v plus this of the selected fruit's centre: the "
