@@ -25,6 +25,7 @@ from schemas.scene import (
     Fruit,
     Obstacles,
     SceneState,
+    SphereObstacle,
     Trunk,
 )
 from schemas.service import DemoAnswer, DemoTick, NodeSpecModel, ServiceStatus, TopicCounters
@@ -70,6 +71,7 @@ __all__ = [
     "ServiceStatus",
     "SimCounters",
     "SimEvent",
+    "SphereObstacle",
     "ToolCommand",
     "Topic",
     "TopicCounters",

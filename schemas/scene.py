@@ -83,11 +83,24 @@ class EllipsoidObstacle(Frozen):
     )
 
 
+class SphereObstacle(Frozen):
+    """A sphere of occupied space seen in the depth image (branches), world frame."""
+
+    name: str = Field(description="Obstacle name, e.g. 'occupied_3'.")
+    center_world_m: Vec3 = Field(description="Centre, world frame, m.")
+    radius_m: PosFloat = Field(description="Radius, m.")
+
+
 class Obstacles(Frozen):
     """The obstacle set the controller's velocity dampers act on."""
 
     cylinders: tuple[CylinderObstacle, ...] = Field(default=(), description="Trunk cylinders.")
     ellipsoids: tuple[EllipsoidObstacle, ...] = Field(default=(), description="Fruit ellipsoids.")
+    spheres: tuple[SphereObstacle, ...] = Field(
+        default=(),
+        description="Occupied space from the depth image (bark-coloured: branches), bounded in "
+        "count; none near the selected fruit.",
+    )
 
 
 class SceneState(Message):

@@ -90,6 +90,18 @@ class Settings(ServiceSettings):
         default=DamperGroup(activation_m=0.10, safety_m=0.02, speed_m_s=0.3),
         description="Dampers robot–fruit ellipsoid (except ignore_fruit_ids).",
     )
+    branch: DamperGroup = Field(
+        default=DamperGroup(activation_m=0.08, safety_m=0.015, speed_m_s=0.3),
+        description="Dampers robot–occupied-space sphere (branches seen in depth).",
+    )
+    branch_pairs_per_body: int = Field(
+        default=3,
+        ge=1,
+        le=64,
+        description="Occupied-space spheres per robot body given a distance and a damper: its "
+        "nearest ones (a branch is many adjacent spheres; the nearest guard the rest, and the "
+        "cycle's cost stays bounded).",
+    )
     self_collision: DamperGroup = Field(
         default=DamperGroup(activation_m=0.08, safety_m=0.01, speed_m_s=0.3),
         description="Dampers for the self-collision pairs of collisions.json.",
@@ -133,7 +145,7 @@ class Settings(ServiceSettings):
 
     @model_validator(mode="after")
     def _cull_covers_dampers(self) -> Settings:
-        need = max(self.trunk.activation_m, self.fruit.activation_m)
+        need = max(self.trunk.activation_m, self.fruit.activation_m, self.branch.activation_m)
         if self.cull_distance_m < need:
             raise ValueError(
                 f"cull_distance_m {self.cull_distance_m} < an activation distance {need}"

@@ -25,6 +25,7 @@ from schemas import TOPICS
 from services.controller.kinsim import SIM_PERIOD_NS, KinematicSim, SafetyMonitor
 from services.controller.scenarios import (
     LoopResult,
+    branch_field,
     fruit,
     fruit_field,
     harvest_target,
@@ -33,6 +34,7 @@ from services.controller.scenarios import (
 )
 
 OBSTACLE_COUNTS = (0, 10, 50, 200)
+BRANCH_CASE = (50, 200)  # 50 fruit and the scene's cap of occupied-space spheres (branches)
 CYCLE_TARGETS = ((0.75, 0.05, 1.05), (0.7, -0.25, 0.95), (0.85, 0.2, 1.2), (0.6, 0.0, 1.3))
 TRUNK_XY_M = (1.05, 0.0)
 
@@ -41,8 +43,11 @@ def _pct(xs: list[float], p: float) -> float:
     return float(np.percentile(np.array(xs), p)) if xs else float("nan")
 
 
-def cycle_times(n_fruit: int, ticks: int, seed: int, settings: Any) -> dict[str, float]:
-    """Per-tick wall times (ms) of the core and of the message I/O with ``n_fruit`` fruit."""
+def cycle_times(
+    n_fruit: int, ticks: int, seed: int, settings: Any, n_spheres: int = 0
+) -> dict[str, float]:
+    """Per-tick wall times (ms) of the core and of the message I/O with ``n_fruit`` fruit (and
+    ``n_spheres`` occupied-space spheres along branches from the trunk)."""
     from services.controller.core import ControllerCore
 
     rng = np.random.default_rng(seed)
@@ -53,7 +58,13 @@ def cycle_times(n_fruit: int, ticks: int, seed: int, settings: Any) -> dict[str,
     # rest spread around; 0 leaves the trunk alone.
     targets = [fruit(i + 1, p) for i, p in enumerate(CYCLE_TARGETS)][:n_fruit]
     field = fruit_field(n_fruit - len(targets), rng) if n_fruit > len(targets) else []
-    core.handle("scene/state", scene([*targets, *field], trunk_xy_m=TRUNK_XY_M))
+    sc = scene([*targets, *field], trunk_xy_m=TRUNK_XY_M)
+    if n_spheres:
+        spheres = branch_field(n_spheres, rng, TRUNK_XY_M, keep_clear_of=CYCLE_TARGETS)
+        sc = sc.model_copy(
+            update={"obstacles": sc.obstacles.model_copy(update={"spheres": tuple(spheres)})}
+        )
+    core.handle("scene/state", sc)
     cycle, cpu, io, dist, solve, near, dampers = [], [], [], [], [], [], []
     per_target = max(1, ticks // len(CYCLE_TARGETS))
     warmup = 20
@@ -205,13 +216,18 @@ def run_controller_bench(
         bar = Progress(transient=True)
         bar.start()
     try:
-        task = bar.add_task("cycle time", total=len(OBSTACLE_COUNTS)) if bar else None
+        task = bar.add_task("cycle time", total=len(OBSTACLE_COUNTS) + 1) if bar else None
         gc.collect()
         for n in OBSTACLE_COUNTS:
             for key, v in cycle_times(n, ticks, seed, settings).items():
                 out[f"{key}_{n}"] = v
             if bar:
                 bar.advance(task)
+        n_fruit, n_spheres = BRANCH_CASE
+        for key, v in cycle_times(n_fruit, ticks, seed, settings, n_spheres).items():
+            out[f"{key}_{n_fruit}+{n_spheres}s"] = v
+        if bar:
+            bar.advance(task)
         if targets:
             t_task = bar.add_task("reachable targets (IK)", total=targets) if bar else None
             pts = reachable_targets(
@@ -250,14 +266,18 @@ def table(r: dict[str, Any]) -> str:
         f"on {r['cpu_count']} CPUs; times in ms; near = obstacles past the broad phase",
         "  ".join(f"{h:>9s}" for h in head),
     ]
-    for n in OBSTACLE_COUNTS:
+    cases = [str(n) for n in OBSTACLE_COUNTS] + ["{}+{}s".format(*BRANCH_CASE)]
+    for n in cases:
+        if f"cycle_p50_ms_{n}" not in r:
+            continue
         keys = [
             *("cycle_p50", "cycle_p99", "cycle_max", "cycle_cpu_p50", "cycle_cpu_p99"),
             *("io_p50", "io_p99", "solve_p50"),
         ]
         vals = [r[f"{k}_ms_{n}"] for k in keys]
-        cells = [f"{n:9d}", *(f"{v:9.3f}" for v in vals), f"{r[f'obstacles_near_mean_{n}']:9.1f}"]
+        cells = [f"{n:>9s}", *(f"{v:9.3f}" for v in vals), f"{r[f'obstacles_near_mean_{n}']:9.1f}"]
         lines.append("  ".join(cells))
+    lines.append("(50+200s: 50 fruit and 200 occupied-space spheres along branches)")
     if "reach_success" in r:
         lines.append(
             f"reach: {100 * r['reach_success']:.0f} % of {r['reach_targets']} reachable targets, "

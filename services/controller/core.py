@@ -74,7 +74,7 @@ class ControllerCore:
         if not urdf.is_file():
             raise ConfigError(f"urdf_path {str(urdf)!r} is not a file")
         self.robot = ControlledRobot(urdf)
-        self.engine = DistanceEngine(self.robot, s.cull_distance_m)
+        self.engine = DistanceEngine(self.robot, s.cull_distance_m, s.branch_pairs_per_body)
         self.hqp = LexicographicHQP(
             self.robot,
             Weights(
@@ -96,6 +96,7 @@ class ControllerCore:
         groups: dict[PairKind, DamperGroup] = {
             "trunk": s.trunk,
             "fruit": s.fruit,
+            "branch": s.branch,
             "self": s.self_collision,
         }
         self.params: dict[PairKind, DamperParams] = {
@@ -155,7 +156,8 @@ class ControllerCore:
 
     def _on_scene(self, msg: SceneState) -> None:
         try:
-            n = len(msg.obstacles.cylinders) + len(msg.obstacles.ellipsoids)
+            o = msg.obstacles
+            n = len(o.cylinders) + len(o.ellipsoids) + len(o.spheres)
             if n > self.s.max_obstacles:
                 raise ObstacleError(
                     f"{n} obstacles, more than max_obstacles {self.s.max_obstacles}"

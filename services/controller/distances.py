@@ -1,6 +1,7 @@
-"""Signed distances between the robot and itself, the trunk and the fruit (coal, through
-pinocchio's geometry model), with a numpy broad phase so that the cost grows with the obstacles
-near the robot, not with all of them.
+"""Signed distances between the robot and itself, the trunk, the fruit and the occupied-space
+spheres (branches) (coal, through pinocchio's geometry model), with a numpy broad phase so that
+the cost grows with the obstacles near the robot, not with all of them. Spheres come many to a
+branch, so each robot body only gets its ``spheres_per_body`` nearest.
 
 Obstacles live in *slots*: geometry objects attached to the world whose size and placement are
 rewritten each tick for the obstacles that passed the broad phase. Every (robot body, slot) pair
@@ -19,8 +20,8 @@ import numpy as np
 from services.controller.obstacles import ObstacleArrays
 from services.controller.robot import ControlledRobot
 
-PairKind = Literal["self", "trunk", "fruit"]
-KINDS: tuple[PairKind, PairKind, PairKind] = ("self", "trunk", "fruit")
+PairKind = Literal["self", "trunk", "fruit", "branch"]
+KINDS: tuple[PairKind, ...] = ("self", "trunk", "fruit", "branch")
 TRUNK_HALF_LENGTH_M = 10.0  # the trunk is an infinite vertical cylinder: 20 m is infinite here
 SLOT_CHUNK = 8
 _FAR = np.array([0.0, 0.0, -100.0])  # where unused slots wait (their pairs are inactive anyway)
@@ -72,13 +73,16 @@ class DistanceEngine:
         robot: the controller's robot (its pinocchio Data must be current: ``set_q``).
         cull_m: broad-phase distance, m: a pair whose lower-bound distance (bounding capsules
             and spheres) exceeds it is not computed. Must be ≥ every activation distance.
+        spheres_per_body: occupied-space spheres kept per robot body (its nearest by the
+            lower bound).
     """
 
-    def __init__(self, robot: ControlledRobot, cull_m: float) -> None:
+    def __init__(self, robot: ControlledRobot, cull_m: float, spheres_per_body: int = 3) -> None:
         import coal
 
         pin = robot.pin
         self.coal, self.pin, self.robot, self.cull_m = coal, pin, robot, cull_m
+        self.spheres_per_body = spheres_per_body
         self.gm = robot.robot.collision_model.copy()
         self.n_self = len(self.gm.collisionPairs)
         # Moving robot bodies that can meet the tree, with their bounding segment (local frame).
@@ -96,14 +100,14 @@ class DistanceEngine:
         # distance routine from the shape types when the GeometryData is built, and a routine
         # run on another type reads the wrong fields (a sphere routine on an ellipsoid was 5 mm
         # off, measured). Sizes change in place (radii, radius), which is safe.
-        self.slots: dict[str, list[int]] = {"fruit": [], "trunk": []}
+        self.slots: dict[str, list[int]] = {"fruit": [], "trunk": [], "branch": []}
         self._slot_key: dict[int, tuple[float, ...]] = {}
         self._pair_idx: dict[str, np.ndarray] = {
             k: np.zeros((len(self.bodies), 0), dtype=int) for k in self.slots
         }
         self._slot_kind: dict[int, str] = {}
         self._slots_hold: dict[str, tuple[int, bytes]] = {}  # what the slots hold, per kind
-        self._add_slots({"fruit": SLOT_CHUNK, "trunk": 2})
+        self._add_slots({"fruit": SLOT_CHUNK, "trunk": 2, "branch": SLOT_CHUNK})
 
     # ---- slots -----------------------------------------------------------------------------
     def _add_slots(self, extra: dict[str, int]) -> None:
@@ -112,11 +116,7 @@ class DistanceEngine:
             cols = []
             for _ in range(n):
                 k = len(self.slots[kind])
-                shape = (
-                    self.coal.Ellipsoid(0.01, 0.01, 0.01)
-                    if kind == "fruit"
-                    else self.coal.Cylinder(0.01, 2 * TRUNK_HALF_LENGTH_M)
-                )
+                shape = self._slot_shape(kind)
                 go = pin.GeometryObject(f"{kind}_slot_{k}", 0, pin.SE3(np.eye(3), _FAR), shape)
                 gid = self.gm.addGeometryObject(go)
                 self.slots[kind].append(gid)
@@ -149,11 +149,21 @@ class DistanceEngine:
         )
         self._mask = np.zeros(len(self.gm.collisionPairs), dtype=bool)
 
+    def _slot_shape(self, kind: str) -> object:
+        if kind == "fruit":
+            return self.coal.Ellipsoid(0.01, 0.01, 0.01)
+        if kind == "branch":
+            return self.coal.Sphere(0.01)
+        return self.coal.Cylinder(0.01, 2 * TRUNK_HALF_LENGTH_M)
+
     def _fill_slots(self, kind: str, near: list[int], obstacles: ObstacleArrays) -> None:
         for s, o in enumerate(near):
             if kind == "fruit":
                 size = tuple(obstacles.ellipsoid_semi_axes_m[o].tolist())
                 center = obstacles.ellipsoid_centers_m[o]
+            elif kind == "branch":
+                size = (float(obstacles.sphere_radii_m[o]),)
+                center = obstacles.sphere_centers_m[o]
             else:
                 size = (float(obstacles.cylinder_radii_m[o]),)
                 center = obstacles.cylinder_points_m[o]
@@ -240,6 +250,10 @@ class DistanceEngine:
                 lb -= self._seg_r[:, None] + r[keep][None, :]
                 g, o = np.nonzero(lb <= self.cull_m)
                 out["fruit"] = (g, keep[o])
+        if len(obs.sphere_centers_m):
+            near = self._nearest_spheres(a, b, obs, lo, hi)
+            if near is not None:
+                out["branch"] = near
         if len(obs.cylinder_points_m):
             # A vertical infinite cylinder: the distance in the horizontal plane.
             lb = segment_point_distances(a[:, :2], b[:, :2], obs.cylinder_points_m[:, :2])
@@ -247,6 +261,29 @@ class DistanceEngine:
             g, o = np.nonzero(lb <= self.cull_m)
             out["trunk"] = (g, o)
         return out
+
+    def _nearest_spheres(
+        self, a: np.ndarray, b: np.ndarray, obs: ObstacleArrays, lo: np.ndarray, hi: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """(body index, sphere index) pairs within cull_m, at most ``spheres_per_body`` per
+        body (the nearest by the capsule–sphere lower bound)."""
+        c, r = obs.sphere_centers_m, obs.sphere_radii_m
+        keep = np.flatnonzero(((c >= lo - r[:, None]) & (c <= hi + r[:, None])).all(axis=1))
+        if not len(keep):
+            return None
+        lb = segment_point_distances(a, b, c[keep])
+        lb -= self._seg_r[:, None] + r[keep][None, :]
+        k = self.spheres_per_body
+        if lb.shape[1] > k:
+            nearest = np.argpartition(lb, k - 1, axis=1)[:, :k]  # (G, k)
+            lb_k = np.take_along_axis(lb, nearest, axis=1)
+        else:
+            nearest = np.broadcast_to(np.arange(lb.shape[1]), lb.shape)
+            lb_k = lb
+        g, j = np.nonzero(lb_k <= self.cull_m)
+        if not len(g):
+            return None
+        return g, keep[nearest[g, j]]
 
     def _collect(
         self, wanted: np.ndarray, n_near: int, activation_m: dict[PairKind, float]
@@ -259,7 +296,7 @@ class DistanceEngine:
         for code, name in enumerate(KINDS):
             dk = d[kind == code]
             rep.min_m[name] = float(dk.min()) if len(dk) else None
-        act = np.array([activation_m[k] for k in KINDS])[kind]
+        act = np.array([activation_m.get(k, -np.inf) for k in KINDS])[kind]
         for i in np.flatnonzero(d <= act).tolist():
             k = int(ids[i])
             res = results[k]

@@ -70,7 +70,7 @@ class SafetyReport:
     """Worst values seen by the monitor over a run (m, rad, rad/s); violations in words."""
 
     min_distance_m: dict[str, float] = field(
-        default_factory=lambda: {"self": np.inf, "trunk": np.inf, "fruit": np.inf}
+        default_factory=lambda: {"self": np.inf, "trunk": np.inf, "fruit": np.inf, "branch": np.inf}
     )
     max_limit_excess_rad: float = 0.0
     max_speed_ratio: float = 0.0
@@ -118,6 +118,8 @@ class SafetyMonitor:
                 if e.fruit_id is not None and e.fruit_id in set(ignore_fruit_ids):
                     continue
                 shapes.append(("fruit", coal.Ellipsoid(*e.semi_axes_m), np.array(e.center_world_m)))
+            for sp in obstacles.spheres:
+                shapes.append(("branch", coal.Sphere(sp.radius_m), np.array(sp.center_world_m)))
         for i, (kind, shape, center) in enumerate(shapes):
             gid = cm.addGeometryObject(
                 pin.GeometryObject(f"monitor_{kind}_{i}", 0, pin.SE3(np.eye(3), center), shape)
@@ -129,16 +131,17 @@ class SafetyMonitor:
         self.n_obstacles = len(shapes)
 
     def distances(self, q_arm_order: np.ndarray) -> dict[str, float]:
-        """Smallest signed distance per kind ('self', 'trunk', 'fruit'), m (inf if none)."""
+        """Smallest signed distance per kind ('self', 'trunk', 'fruit', 'branch'), m (inf if
+        none)."""
         self._set(q_arm_order)
-        out = {"self": np.inf, "trunk": np.inf, "fruit": np.inf}
+        out = {"self": np.inf, "trunk": np.inf, "fruit": np.inf, "branch": np.inf}
         for kind, d in zip(self.kind_of_pair, self.robot.distances(), strict=True):
             out[kind] = min(out[kind], d.min_distance)
         return out
 
     def obstacle_distances(self, q_arm_order: np.ndarray) -> np.ndarray:
         """Smallest robot distance to each obstacle, m, in the order they were given (the
-        trunk cylinders first, then the ellipsoids not ignored)."""
+        trunk cylinders first, then the ellipsoids not ignored, then the spheres)."""
         self._set(q_arm_order)
         out = np.full(self.n_obstacles, np.inf)
         for i, d in zip(self.obstacle_of_pair, self.robot.distances(), strict=True):

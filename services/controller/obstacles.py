@@ -4,7 +4,7 @@ touch (PlanTarget.ignore_fruit_ids) left out, as numpy arrays for the broad phas
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
@@ -18,17 +18,22 @@ class ObstacleError(ValueError):
 
 @dataclass(frozen=True)
 class ObstacleArrays:
-    """World-frame obstacles: fruit ellipsoids (axis-aligned) and vertical infinite cylinders."""
+    """World-frame obstacles: fruit ellipsoids (axis-aligned), vertical infinite cylinders and
+    spheres of occupied space (branches)."""
 
     ellipsoid_centers_m: np.ndarray  # (N, 3)
     ellipsoid_semi_axes_m: np.ndarray  # (N, 3)
     ellipsoid_fruit_ids: tuple[int | None, ...]
     cylinder_points_m: np.ndarray  # (M, 3): a point on each axis
     cylinder_radii_m: np.ndarray  # (M,)
+    sphere_centers_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (K, 3)
+    sphere_radii_m: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (K,)
 
     @property
     def count(self) -> int:
-        return len(self.ellipsoid_centers_m) + len(self.cylinder_points_m)
+        return (
+            len(self.ellipsoid_centers_m) + len(self.cylinder_points_m) + len(self.sphere_radii_m)
+        )
 
     @cached_property
     def ellipsoid_bound_m(self) -> np.ndarray:
@@ -53,6 +58,9 @@ def check_obstacles(obstacles: Obstacles, min_size_m: float, max_size_m: float) 
     for e in obstacles.ellipsoids:
         _check_size(e.name, e.semi_axes_m, min_size_m, max_size_m)
         _check_finite(e.name, e.center_world_m)
+    for sp in obstacles.spheres:
+        _check_size(sp.name, (sp.radius_m,), min_size_m, max_size_m)
+        _check_finite(sp.name, sp.center_world_m)
 
 
 def _check_size(name: str, sizes: tuple[float, ...], lo: float, hi: float) -> None:
@@ -67,8 +75,8 @@ def _check_finite(name: str, v: tuple[float, ...]) -> None:
 
 
 def obstacle_arrays(obstacles: Obstacles, ignore_fruit_ids: tuple[int, ...] = ()) -> ObstacleArrays:
-    """Arrays of the obstacles the dampers guard: every cylinder, and every ellipsoid except
-    the fruit in ``ignore_fruit_ids`` (the target while the tools must touch it)."""
+    """Arrays of the obstacles the dampers guard: every cylinder and sphere, and every ellipsoid
+    except the fruit in ``ignore_fruit_ids`` (the target while the tools must touch it)."""
     ignore = set(ignore_fruit_ids)
     ells = [e for e in obstacles.ellipsoids if e.fruit_id is None or e.fruit_id not in ignore]
     return ObstacleArrays(
@@ -77,4 +85,6 @@ def obstacle_arrays(obstacles: Obstacles, ignore_fruit_ids: tuple[int, ...] = ()
         tuple(e.fruit_id for e in ells),
         np.array([c.axis_point_world_m for c in obstacles.cylinders], dtype=float).reshape(-1, 3),
         np.array([c.radius_m for c in obstacles.cylinders], dtype=float),
+        np.array([sp.center_world_m for sp in obstacles.spheres], dtype=float).reshape(-1, 3),
+        np.array([sp.radius_m for sp in obstacles.spheres], dtype=float),
     )

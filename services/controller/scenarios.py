@@ -12,7 +12,14 @@ import numpy as np
 from schemas.base import Header
 from schemas.control import AbsoluteTarget, ControlStatus, PlanTarget, RelativeTarget
 from schemas.robot import JointVelocityCommand
-from schemas.scene import CylinderObstacle, EllipsoidObstacle, Obstacles, SceneState, Trunk
+from schemas.scene import (
+    CylinderObstacle,
+    EllipsoidObstacle,
+    Obstacles,
+    SceneState,
+    SphereObstacle,
+    Trunk,
+)
 from services.controller.geometry import matrix_to_quat_xyzw
 from services.controller.kinsim import KinematicSim, SafetyMonitor, SafetyReport
 from services.robot.reach import (
@@ -116,6 +123,44 @@ def fruit_field(
         d = monitor.obstacle_distances(KinematicSim().q_arm_order())
         out += [f for f, di in zip(batch, d, strict=True) if di >= robot_clearance_m]
     return [fruit(1000 + i, f.center_world_m) for i, f in enumerate(out)]
+
+
+def branch_field(
+    n: int,
+    rng: np.random.Generator,
+    trunk_xy_m: Sequence[float],
+    keep_clear_of: Sequence[Sequence[float]] = (),
+    robot_clearance_m: float = 0.12,
+    spacing_m: float = 0.04,
+    radius_m: float = 0.03,
+) -> list[SphereObstacle]:
+    """``n`` occupied-space spheres ``spacing_m`` apart along random straight branches from the
+    trunk axis towards the robot (as the scene publishes them), none within 0.2 m of a point of
+    ``keep_clear_of`` (the targets) nor within ``robot_clearance_m`` of the robot in its ready
+    posture."""
+    out: list[np.ndarray] = []
+    while len(out) < n:
+        start = np.array([trunk_xy_m[0], trunk_xy_m[1], rng.uniform(0.7, 1.6)])
+        end = start + rng.uniform((-0.8, -0.6, -0.2), (-0.2, 0.6, 0.4))
+        steps = max(2, int(np.linalg.norm(end - start) / spacing_m))
+        pts = [start + (end - start) * t for t in np.linspace(0, 1, steps)]
+        pts = [
+            p for p in pts if all(np.linalg.norm(p - np.asarray(k)) >= 0.2 for k in keep_clear_of)
+        ]
+        if not pts:
+            continue
+        monitor = SafetyMonitor(Obstacles(spheres=tuple(_sphere(0, p, radius_m) for p in pts)))
+        d = monitor.obstacle_distances(KinematicSim().q_arm_order())
+        out += [p for p, di in zip(pts, d, strict=True) if di >= robot_clearance_m]
+    return [_sphere(i, p, radius_m) for i, p in enumerate(out[:n])]
+
+
+def _sphere(i: int, c: np.ndarray, radius_m: float) -> SphereObstacle:
+    return SphereObstacle(
+        name=f"occupied_{i}",
+        center_world_m=(float(c[0]), float(c[1]), float(c[2])),
+        radius_m=radius_m,
+    )
 
 
 @dataclass

@@ -198,6 +198,65 @@ class Settings(ServiceSettings):
         description="Trunk radius when none is measured ('paper' method): the obstacle's "
         "smallest radius, m.",
     )
+    # ---- occupied space from depth (branches) -------------------------------------------
+    occupancy: bool = Field(
+        default=True,
+        description="Publish bark-coloured depth points (branches) as sphere obstacles, kept "
+        "in a persistent world voxel grid (services/scene/occupancy.py).",
+    )
+    occupancy_voxel_m: float = Field(default=0.04, gt=0.005, le=0.5, description="Voxel side, m.")
+    occupancy_sphere_radius_m: float = Field(
+        default=0.03,
+        gt=0,
+        le=0.5,
+        description="Radius of each voxel's sphere, centred on the mean of its points (covers "
+        "the voxel's points and the branch's unseen back), m.",
+    )
+    occupancy_stride_px: int = Field(
+        default=3, ge=1, le=32, description="Every this-many-th pixel in u and v is used."
+    )
+    occupancy_max_depth_m: float = Field(
+        default=1.6, gt=0, le=20, description="Farthest depth used, m (beyond: background)."
+    )
+    occupancy_min_points: int = Field(
+        default=3, ge=1, description="Fewest of a frame's points for a voxel to count as hit."
+    )
+    occupancy_robot_margin_m: float = Field(
+        default=0.04,
+        ge=0,
+        le=0.5,
+        description="Points within a robot capsule's radius plus this are the robot, m.",
+    )
+    occupancy_clear_frames: int = Field(
+        default=3,
+        ge=1,
+        description="Consecutive frames seeing valid depth behind a voxel that forget it.",
+    )
+    occupancy_clear_margin_m: float = Field(
+        default=0.06,
+        gt=0,
+        description="Depth behind a voxel's centre by more than this counts as free space, m.",
+    )
+    occupancy_forget_after_frames: int = Field(
+        default=900,
+        ge=1,
+        description="A voxel not hit for this many frames is forgotten (15 Hz: 60 s); hidden "
+        "voxels (behind an arm) are kept until then.",
+    )
+    occupancy_max_obstacles: int = Field(
+        default=200,
+        ge=0,
+        le=450,
+        description="At most this many spheres (the most recently hit): the controller refuses "
+        "scenes over its max_obstacles (500) with the fruit and the trunk.",
+    )
+    occupancy_target_clearance_m: float = Field(
+        default=0.2,
+        ge=0,
+        le=1,
+        description="No sphere comes within d_v plus this of the selected fruit's centre: the "
+        "dish must get under it and the cutter to its peduncle, next to its own branch's tip, m.",
+    )
 
 
 SPEC = NodeSpec(

@@ -39,7 +39,8 @@ from services.scene import Settings
 from services.scene.fruit3d import EstimateFailure, FruitEstimate, FruitParams, estimate_fruit
 from services.scene.fruit_list import Entry, FruitList, ListParams, Measurement
 from services.scene.geometry import Pinhole, PoseError, RigidTransform, vec3
-from services.scene.obstacles import build_obstacles
+from services.scene.obstacles import build_obstacles, trunk_radius_m
+from services.scene.occupancy import OccupancyGrid, OccupancyParams
 from services.scene.trunk import TrunkFailure, TrunkParams, measure_trunk
 from services.scene.trunk_track import TrackParams, TrunkTrack
 
@@ -98,6 +99,24 @@ class SceneCore:
                 s.trunk_reacquire_frames,
                 s.trunk_forget_after_frames,
             )
+        )
+        self.occupancy = (
+            OccupancyGrid(
+                OccupancyParams(
+                    voxel_m=s.occupancy_voxel_m,
+                    sphere_radius_m=s.occupancy_sphere_radius_m,
+                    stride_px=s.occupancy_stride_px,
+                    max_depth_m=s.occupancy_max_depth_m,
+                    min_points=s.occupancy_min_points,
+                    robot_margin_m=s.occupancy_robot_margin_m,
+                    clear_frames=s.occupancy_clear_frames,
+                    clear_margin_m=s.occupancy_clear_margin_m,
+                    forget_after_frames=s.occupancy_forget_after_frames,
+                    max_obstacles=s.occupancy_max_obstacles,
+                )
+            )
+            if s.occupancy
+            else None
         )
         self.target: int | None = None  # the planner's current fruit (harvest/events)
         self.body = RobotBody() if s.robot_self_filter else None
@@ -221,7 +240,9 @@ class SceneCore:
         hsv = cv2.cvtColor(np.ascontiguousarray(frame.rgb), cv2.COLOR_RGB2HSV)
         measured: dict[int, Measurement] = {}
         failed: dict[int, FruitFlag] = {}
-        robot = self._robot_at(frame.header.stamp_ns)
+        robot_all = self._robot_at(frame.header.stamp_ns)
+        # The dish's sphere left out for fruit: a fruit in the dish is the planner's to judge.
+        robot = robot_all[:-1]
         for tr in tracks.tracks:
             if not (tr.confirmed or self.s.accept_tentative):
                 self.counters["track_tentative"] += 1
@@ -258,7 +279,10 @@ class SceneCore:
             log.debug("%s", note)
         for fid in [k for k in self.ratios if k not in self.fruits.entries]:
             del self.ratios[fid]
-        self._measure_trunk(frame, depth_m, K, T)
+        mask = self._measure_trunk(frame, depth_m, K, T)
+        if self.occupancy is not None:
+            # Bark-coloured points are the trunk and the branches (the trunk's own mask).
+            self.occupancy.step(mask, depth_m, K, T, robot_all)
 
     def _measurement(self, fid: int, est: FruitEstimate, T: RigidTransform) -> Measurement:
         flags: list[FruitFlag] = []
@@ -278,8 +302,8 @@ class SceneCore:
         )
 
     def _robot_at(self, stamp_ns: int) -> tuple[Capsule, ...]:
-        """The arms' and tools' capsules just before the frame's stamp (the dish's sphere left
-        out: a fruit in the dish is the planner's to judge); () without a joint state for it."""
+        """The arms', tools' and dish's capsules just before the frame's stamp (the dish's sphere
+        last); () without a joint state for it."""
         if self.body is None or self.newest_joint_ns is None:
             return ()
         before = [k for k in self.joints if stamp_ns - self.joint_lag_ns <= k < stamp_ns]
@@ -289,7 +313,7 @@ class SceneCore:
             return ()
         q = {role: arm.position_rad for role, arm in js.arms.items()}
         try:
-            return self.body.capsules(q)[:-1]
+            return self.body.capsules(q)
         except (KeyError, ValueError) as exc:
             self.counters["joint_state_invalid"] += 1
             log.warning("joint state at %d ns: %s; no self-filter for this frame", stamp_ns, exc)
@@ -318,7 +342,8 @@ class SceneCore:
 
     def _measure_trunk(
         self, frame: RgbdFrame, depth_m: np.ndarray, K: Pinhole, T: RigidTransform
-    ) -> None:
+    ) -> np.ndarray:
+        """Update the trunk; returns this frame's bark mask (H, W) bool."""
         from services.vision.trunk_mask import trunk_mask
 
         mask = trunk_mask(frame, self.s.trunk_max_depth_m, self.trunk_hsv)
@@ -329,6 +354,7 @@ class SceneCore:
         note = self.trunk.step(fix)
         if note:
             log.info("%s", note)
+        return mask
 
     # ---- output --------------------------------------------------------------------------------
     def _state(self, tracks: Tracks, problem: str) -> SceneState:
@@ -345,6 +371,10 @@ class SceneCore:
             self.s.trunk_default_radius_m,
             self.s.trunk_tool_margin_m,
         )
+        if self.occupancy is not None:
+            obstacles = obstacles.model_copy(
+                update={"spheres": self.occupancy.obstacles(*self._keep_out(selected))}
+            )
         return SceneState(
             header=self.stamper.answer(TOPIC_OUT, tracks.header, frame_id="world"),
             fruits=fruits,
@@ -353,6 +383,26 @@ class SceneCore:
             selected_fruit_id=selected_id,
             input_problem=problem,
         )
+
+    def _keep_out(
+        self, selected: Entry | None
+    ) -> tuple[list[tuple[np.ndarray, float]], tuple[np.ndarray, float] | None]:
+        """Where no occupied sphere may be: around the selected fruit (its working space) and
+        inside the trunk obstacle (already guarded by its cylinder)."""
+        spheres = []
+        if selected is not None:
+            st = selected.state
+            spheres.append(
+                (st.position_world_m, st.semi_axis_v_m + self.s.occupancy_target_clearance_m)
+            )
+        trunk = self.trunk.state
+        cylinder = None
+        if trunk is not None:
+            r_obs, _own = trunk_radius_m(
+                trunk, selected, self.s.trunk_default_radius_m, self.s.trunk_tool_margin_m
+            )
+            cylinder = (trunk.axis_world_m, r_obs)
+        return spheres, cylinder
 
     def _to_cam(self, p_world: np.ndarray) -> np.ndarray:
         assert self.T is not None  # an entry or a trunk exists only after a frame was used

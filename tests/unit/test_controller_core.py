@@ -30,6 +30,7 @@ SAFETY = {
     "self": SETTINGS.self_collision.safety_m,
     "trunk": SETTINGS.trunk.safety_m,
     "fruit": SETTINGS.fruit.safety_m,
+    "branch": SETTINGS.branch.safety_m,
 }
 FRUIT = (0.75, 0.05, 1.05)
 

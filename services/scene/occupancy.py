@@ -1,0 +1,189 @@
+"""Occupied space from the depth image (branches): bark-coloured points, neither the robot nor
+near the selected fruit, binned in a world-frame voxel grid that persists across frames.
+
+Why bark colour: in the sim only the trunk, the branches and the fruit are solid (leaves and
+twigs have no collision shape in pybullet, so touching them is no collision), and the branches
+share the trunk's bark colour. Leaves (green), fruit (orange), the robot and the grey background
+are left out by colour; the robot's own bark-coloured shadows by its capsules.
+
+Each voxel holding at least ``min_points`` of this frame's points is *seen*; its obstacle is a
+sphere at the mean of the points it ever held. A voxel is forgotten when the depth image shows
+space behind it for ``clear_frames`` consecutive frames (something moved away), or after
+``forget_after_frames`` frames without a hit. A voxel hidden behind an arm gets neither (the
+depth there is nearer than the voxel): it is remembered, which is the point of persistence. A
+pixel with no valid depth (0, NaN, inf) is no evidence either way, so a broken frame neither
+creates nor wipes obstacles.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from schemas.scene import SphereObstacle
+from services.robot.clearance import Capsule
+from services.scene.geometry import Pinhole, RigidTransform, vec3
+
+
+@dataclass(frozen=True)
+class OccupancyParams:
+    """Voxel grid settings (m, px, frames); see the scene Settings for their meaning."""
+
+    voxel_m: float = 0.04
+    sphere_radius_m: float = 0.03
+    stride_px: int = 3
+    max_depth_m: float = 1.6
+    min_points: int = 3
+    robot_margin_m: float = 0.04
+    clear_frames: int = 3
+    clear_margin_m: float = 0.06
+    forget_after_frames: int = 900
+    max_obstacles: int = 200
+
+
+@dataclass
+class Voxel:
+    """One occupied voxel: the sum of its points (for their mean), and its hit bookkeeping."""
+
+    sum_m: np.ndarray
+    points: int
+    last_hit_frame: int
+    free_frames: int = 0
+
+    @property
+    def center_m(self) -> np.ndarray:
+        return self.sum_m / self.points
+
+
+@dataclass
+class OccupancyGrid:
+    """Persistent voxel grid of bark-coloured points (world frame); ``step`` once per frame."""
+
+    p: OccupancyParams
+    voxels: dict[tuple[int, int, int], Voxel] = field(default_factory=dict)
+    frame: int = 0
+
+    def step(
+        self,
+        mask: np.ndarray,
+        depth_m: np.ndarray,
+        K: Pinhole,
+        T: RigidTransform,
+        robot: Sequence[Capsule],
+    ) -> None:
+        """Take one frame: ``mask`` (H, W) bark-coloured pixels, ``depth_m`` (H, W) depth in m
+        (0 / NaN / inf: invalid), the camera ``K`` and pose ``T``, the robot's capsules."""
+        self.frame += 1
+        valid = np.isfinite(depth_m) & (depth_m > 0) & (depth_m <= self.p.max_depth_m)
+        self._clear(depth_m, valid, K, T)
+        pts = _points_world(mask & valid, depth_m, K, T, self.p.stride_px)
+        if robot and len(pts):
+            pts = pts[~_near_robot(pts, robot, self.p.robot_margin_m)]
+        self._hit(pts)
+        old = [
+            k
+            for k, v in self.voxels.items()
+            if self.frame - v.last_hit_frame > self.p.forget_after_frames
+        ]
+        for k in old:
+            del self.voxels[k]
+
+    def _hit(self, pts: np.ndarray) -> None:
+        if not len(pts):
+            return
+        keys, inverse, counts = np.unique(
+            np.floor(pts / self.p.voxel_m).astype(np.int64),
+            axis=0,
+            return_inverse=True,
+            return_counts=True,
+        )
+        sums = np.zeros((len(keys), 3))
+        np.add.at(sums, inverse.reshape(-1), pts)
+        for k, s, n in zip(keys.tolist(), sums, counts.tolist(), strict=True):
+            if n < self.p.min_points:
+                continue
+            key = (k[0], k[1], k[2])
+            v = self.voxels.get(key)
+            if v is None:
+                self.voxels[key] = Voxel(s.copy(), n, self.frame)
+            else:
+                v.sum_m += s
+                v.points += n
+                v.last_hit_frame, v.free_frames = self.frame, 0
+
+    def _clear(self, depth_m: np.ndarray, valid: np.ndarray, K: Pinhole, T: RigidTransform) -> None:
+        """Count a frame as free for each voxel whose centre's pixel sees valid depth clearly
+        behind it; forget voxels free for ``clear_frames`` frames in a row."""
+        if not self.voxels:
+            return
+        keys = list(self.voxels)
+        c_cam = (np.array([self.voxels[k].center_m for k in keys]) - T.t_m) @ T.R
+        z = c_cam[:, 2]
+        front = z > 1e-3
+        u = np.full(len(keys), -1)
+        v = np.full(len(keys), -1)
+        u[front] = np.round(K.fx * c_cam[front, 0] / z[front] + K.cx).astype(int)
+        v[front] = np.round(K.fy * c_cam[front, 1] / z[front] + K.cy).astype(int)
+        inside = front & (u >= 0) & (u < K.width) & (v >= 0) & (v < K.height)
+        for i in np.flatnonzero(inside).tolist():
+            if not valid[v[i], u[i]]:
+                continue  # no evidence: keep the count as it is
+            vox = self.voxels[keys[i]]
+            if depth_m[v[i], u[i]] > z[i] + self.p.clear_margin_m:
+                vox.free_frames += 1
+                if vox.free_frames >= self.p.clear_frames:
+                    del self.voxels[keys[i]]
+            else:
+                vox.free_frames = 0
+
+    def obstacles(
+        self,
+        keep_out: Sequence[tuple[np.ndarray, float]] = (),
+        inside_cylinder: tuple[np.ndarray, float] | None = None,
+    ) -> tuple[SphereObstacle, ...]:
+        """Spheres at the voxels' point means, the ``max_obstacles`` most recently hit (then by
+        voxel index: deterministic), without those whose surface comes within a keep-out sphere
+        ((centre, radius), m: the selected fruit's working space) or whose centre is inside the
+        vertical cylinder ``inside_cylinder`` ((axis point, radius), m: the trunk obstacle,
+        which already guards that space)."""
+        r = self.p.sphere_radius_m
+        kept: list[tuple[int, tuple[int, int, int], np.ndarray]] = []
+        for key, vox in self.voxels.items():
+            c = vox.center_m
+            if any(float(np.linalg.norm(c - k)) < kr + r for k, kr in keep_out):
+                continue
+            if inside_cylinder is not None:
+                axis, radius = inside_cylinder
+                if float(np.hypot(c[0] - axis[0], c[1] - axis[1])) < radius:
+                    continue
+            kept.append((-vox.last_hit_frame, key, c))
+        kept.sort(key=lambda t: (t[0], t[1]))
+        return tuple(
+            SphereObstacle(name=f"occupied_{i}", center_world_m=vec3(c), radius_m=r)
+            for i, (_f, _k, c) in enumerate(kept[: self.p.max_obstacles])
+        )
+
+
+def _points_world(
+    mask: np.ndarray, depth_m: np.ndarray, K: Pinhole, T: RigidTransform, stride_px: int
+) -> np.ndarray:
+    """(N, 3) world points of every ``stride_px``-th masked pixel, m."""
+    sub = mask[::stride_px, ::stride_px]
+    vs, us = np.nonzero(sub)
+    vs, us = vs * stride_px, us * stride_px
+    z = depth_m[vs, us]
+    cam = np.stack([(us - K.cx) / K.fx * z, (vs - K.cy) / K.fy * z, z], axis=1)
+    return T.to_world(cam)
+
+
+def _near_robot(pts: np.ndarray, robot: Sequence[Capsule], margin_m: float) -> np.ndarray:
+    """(N,) points within a capsule's radius plus ``margin_m`` of its axis."""
+    near = np.zeros(len(pts), dtype=bool)
+    for a, b, radius in robot:
+        ab = b - a
+        t = np.clip((pts - a) @ ab / max(float(ab @ ab), 1e-12), 0.0, 1.0)
+        d = np.linalg.norm(pts - (a + t[:, None] * ab), axis=1)
+        near |= d < radius + margin_m
+    return near

@@ -1,0 +1,154 @@
+"""services/scene/occupancy.py and its use in the scene core: bark-coloured depth points become
+bounded sphere obstacles in the world frame; the robot, the selected fruit's working space,
+leaves and broken depth frames do not create (or wipe) any."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from services.runtime.settings import load_settings
+from services.scene import Settings
+from services.scene.core import SceneCore
+from services.scene.geometry import RigidTransform
+from services.scene.occupancy import OccupancyGrid, OccupancyParams
+from tests.scene_helpers import BARK, LEAF, LEVEL_POSE, R_WORLD_CAM, T_WORLD_CAM_M, K, Scene, tracks
+
+T = RigidTransform.of(LEVEL_POSE)
+P = OccupancyParams(voxel_m=0.04, sphere_radius_m=0.03, stride_px=2, clear_frames=3)
+BRANCH = (300, 340, 40, 440)  # u0, u1, v0, v1: a bark-coloured strip 0.8 m ahead
+
+
+def branch_scene(z_m: float = 0.8, colour: tuple[int, int, int] = BARK) -> Scene:
+    sc = Scene()
+    sc.plane_rect(z_m, *BRANCH, colour=colour)
+    return sc
+
+
+def bark_mask(sc: Scene) -> np.ndarray:
+    return np.all(sc.rgb == BARK, axis=-1)
+
+
+def centres(grid: OccupancyGrid, **kw: object) -> np.ndarray:
+    return np.array([s.center_world_m for s in grid.obstacles(**kw)]).reshape(-1, 3)  # type: ignore[arg-type]
+
+
+def strip_world_box() -> tuple[np.ndarray, np.ndarray]:
+    """World bounds of the strip's surface at 0.8 m."""
+    u0, u1, v0, v1 = BRANCH
+    corners = [K.deproject(u, v, 0.8) for u in (u0, u1) for v in (v0, v1)]
+    w = np.array(corners) @ R_WORLD_CAM.T + T_WORLD_CAM_M
+    return w.min(axis=0), w.max(axis=0)
+
+
+def test_bark_points_become_spheres_on_the_strip() -> None:
+    sc = branch_scene()
+    grid = OccupancyGrid(P)
+    grid.step(bark_mask(sc), sc.depth, K, T, ())
+    c = centres(grid)
+    lo, hi = strip_world_box()
+    assert len(c) >= 5
+    assert np.all(c >= lo - 0.005) and np.all(c <= hi + 0.005)
+    assert all(s.radius_m == P.sphere_radius_m for s in grid.obstacles())
+
+
+def test_points_on_the_robot_are_left_out() -> None:
+    sc = branch_scene()
+    lo, hi = strip_world_box()
+    mid = (lo + hi) / 2
+    # a link (capsule) along the strip's upper half
+    capsule = (np.array([mid[0], mid[1], mid[2]]), np.array([mid[0], mid[1], hi[2] + 0.1]), 0.03)
+    grid = OccupancyGrid(P)
+    grid.step(bark_mask(sc), sc.depth, K, T, (capsule,))
+    c = centres(grid)
+    assert len(c) > 0, "the lower half is still a branch"
+    assert np.all(c[:, 2] < mid[2] + 0.02)
+
+
+def test_nothing_within_the_keep_out_sphere_and_the_cylinder() -> None:
+    sc = branch_scene()
+    grid = OccupancyGrid(P)
+    grid.step(bark_mask(sc), sc.depth, K, T, ())
+    lo, hi = strip_world_box()
+    mid = (lo + hi) / 2
+    kept = centres(grid, keep_out=[(mid, 0.05)])
+    assert len(kept) > 0 and len(kept) < len(centres(grid))
+    assert np.all(np.linalg.norm(kept - mid, axis=1) >= 0.05 + P.sphere_radius_m)
+    assert len(centres(grid, inside_cylinder=(mid, 0.5))) == 0
+
+
+def test_the_count_is_capped_to_the_most_recently_hit() -> None:
+    sc = branch_scene()
+    grid = OccupancyGrid(OccupancyParams(stride_px=2, max_obstacles=3))
+    grid.step(bark_mask(sc), sc.depth, K, T, ())
+    assert len(grid.voxels) > 3 and len(grid.obstacles()) == 3
+
+
+@pytest.mark.parametrize("bad", ["zero", "nan", "inf"])
+def test_a_broken_depth_frame_neither_creates_nor_wipes_obstacles(bad: str) -> None:
+    value = {"zero": 0.0, "nan": np.nan, "inf": np.inf}[bad]
+    sc = branch_scene()
+    broken = np.full_like(sc.depth, value)
+    first = OccupancyGrid(P)
+    for _ in range(5):
+        first.step(bark_mask(sc), broken, K, T, ())
+    assert first.obstacles() == ()
+    grid = OccupancyGrid(P)
+    grid.step(bark_mask(sc), sc.depth, K, T, ())
+    before = centres(grid)
+    for _ in range(2 * P.clear_frames):
+        grid.step(bark_mask(sc), broken, K, T, ())
+    assert np.array_equal(centres(grid), before)
+
+
+def test_a_branch_hidden_behind_an_arm_is_remembered_and_one_gone_is_forgotten() -> None:
+    sc = branch_scene()
+    grid = OccupancyGrid(P)
+    grid.step(bark_mask(sc), sc.depth, K, T, ())
+    n = len(grid.obstacles())
+    hidden = Scene()
+    hidden.plane_rect(0.5, 250, 400, 20, 460, colour=(120, 120, 120))  # an arm in front
+    hidden.plane_rect(1.4, 0, K.width, 0, K.height, colour=(200, 200, 200))  # background
+    for _ in range(2 * P.clear_frames):
+        grid.step(bark_mask(hidden), hidden.depth, K, T, ())
+    assert len(grid.obstacles()) == n
+    gone = Scene()
+    gone.plane_rect(1.4, 0, K.width, 0, K.height, colour=(200, 200, 200))  # seen through
+    for _ in range(P.clear_frames - 1):
+        grid.step(bark_mask(gone), gone.depth, K, T, ())
+    assert len(grid.obstacles()) == n
+    grid.step(bark_mask(gone), gone.depth, K, T, ())
+    assert grid.obstacles() == ()
+
+
+# ---- in the scene core --------------------------------------------------------------------
+def run_core(sc: Scene, boxes: dict[int, tuple], **settings: object):  # type: ignore[no-untyped-def]
+    core = SceneCore(load_settings(Settings, {"robot_self_filter": False, **settings}))
+    state = None
+    for k in range(4):  # the track is confirmed from the first frame; the list fills at once
+        core.handle("camera/rgbd", sc.frame(k, 1000 * (k + 1)))
+        (out,) = core.handle("perception/tracks", tracks(k, 1000 * (k + 1), k, boxes))
+        state = out[1]
+    return state
+
+
+def test_the_scene_publishes_bark_as_spheres_and_leaves_none() -> None:
+    state = run_core(branch_scene(), {})
+    assert len(state.obstacles.spheres) > 0
+    assert run_core(branch_scene(colour=LEAF), {}).obstacles.spheres == ()
+    assert run_core(branch_scene(), {}, occupancy=False).obstacles.spheres == ()
+
+
+def test_the_selected_fruits_working_space_is_kept_free() -> None:
+    sc = branch_scene()
+    # a fruit hanging beside the strip, 0.8 m ahead
+    sc.ellipsoid((0.12, 0.0, 0.78), 0.04, 0.045)
+    state = run_core(sc, {1: sc.box(1)})
+    (f,) = state.fruits
+    assert f.status == "selected"
+    c = np.array([s.center_world_m for s in state.obstacles.spheres]).reshape(-1, 3)
+    reach = f.semi_axis_v_m + Settings().occupancy_target_clearance_m + 0.03
+    assert len(c) > 0, "the strip's far end is still an obstacle"
+    assert np.all(np.linalg.norm(c - np.array(f.position_world_m), axis=1) >= reach - 1e-9)
+    free = run_core(sc, {})  # no fruit selected: the strip is whole
+    assert len(free.obstacles.spheres) > len(c)
