@@ -17,7 +17,7 @@ the damper's d_s and the hull): a fruit it calls blocked would be a stuck harves
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Mapping, Sequence
 
 import numpy as np
 
@@ -77,3 +77,18 @@ def blockers(
         if hit:
             out.append(i)
     return out
+
+
+def clearable(blocked_by: Mapping[int, Collection[int]]) -> set[int]:
+    """The keys that can all be harvested in some order that takes every blocker first: the
+    fixpoint from the free ones. A blocker that is not a key stays (it is never cleared); keys
+    blocking each other in a cycle are never cleared either."""
+    done: set[int] = set()
+    changed = True
+    while changed:
+        changed = False
+        for k in sorted(blocked_by):
+            if k not in done and set(blocked_by[k]) <= done:
+                done.add(k)
+                changed = True
+    return done
