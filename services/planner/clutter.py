@@ -32,6 +32,12 @@ SWEEP_SAMPLES = 7
 SAME_FRUIT_SHARE = 0.8  # centres closer than this share of d_h + d_h: one fruit, two tracks
 
 
+def same_fruit(a: FruitShape, b: FruitShape) -> bool:
+    """Two estimates overlapping more than two fruit can: one fruit seen as two tracks."""
+    d_m = float(np.linalg.norm(a.centre_world_m - b.centre_world_m))
+    return d_m < SAME_FRUIT_SHARE * (a.d_h_m + b.d_h_m)
+
+
 def _to_cylinder_m(p: np.ndarray, floor: np.ndarray) -> float:
     """Distance from point p to the dish cylinder standing on ``floor`` (0 inside)."""
     d = p - floor
@@ -56,8 +62,8 @@ def blockers(
     out = []
     for i, f in enumerate(others):
         c = f.centre_world_m
-        if np.linalg.norm(c - target.centre_world_m) < SAME_FRUIT_SHARE * (f.d_h_m + target.d_h_m):
-            continue  # two fruit cannot overlap: a second track of the target itself
+        if same_fruit(f, target):
+            continue  # a second track of the target itself
         r = max(f.d_h_m, f.d_v_m) + clearance_m
         hit = False
         for t in np.linspace(0.0, 1.0, SWEEP_SAMPLES):

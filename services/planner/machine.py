@@ -34,7 +34,7 @@ from schemas.control import ControlStatus, HarvestPhase
 from schemas.harvest import FruitOutcome, HarvestEventKind
 from services.planner import Settings
 from services.planner.book import FruitBook, FruitRecord
-from services.planner.clutter import blockers, clearable
+from services.planner.clutter import blockers, clearable, same_fruit
 from services.planner.kinematics import Kinematics
 from services.planner.order import nearest_first, planned_order
 from services.planner.poses import PoseSettings, ToolPoses, harvest_pose, pre_pose
@@ -305,7 +305,7 @@ class Machine:
 
     # ---- selection ---------------------------------------------------------------------------
     def _candidates(self) -> list[FruitRecord]:
-        return self.book.candidates(self.s.lost_after_frames)
+        return [r for r in self.book.candidates(self.s.lost_after_frames) if not self._ghost(r)]
 
     def _select(self, now: int) -> None:
         """The next fruit by the policy. Before committing: the IK must reach its poses
@@ -391,12 +391,27 @@ class Machine:
             str(ok[i].fruit_id) for i in order
         )
 
+    def _ghost(self, rec: FruitRecord) -> bool:
+        """A record not seen now that overlaps a fruit known to be off the tree (harvested,
+        dropped) is that fruit under another track ID, listed where it hung until the scene
+        forgets it: neither a candidate nor a neighbour in the way."""
+        if rec.seen.frames_unseen == 0 or rec.outcome in ("harvested", "dropped"):
+            return False
+        return any(
+            same_fruit(rec.planned, r.planned)
+            for r in self.book.detected()
+            if r is not rec and r.outcome in ("harvested", "dropped")
+        )
+
     def _blockers(self, rec: FruitRecord) -> list[FruitRecord]:
         """Fruit on the tree (seen, not known to be off it) where the tools go for ``rec``."""
         present = [
             r
             for r in self.book.detected()
-            if r is not rec and r.in_scene and r.outcome not in ("harvested", "dropped")
+            if r is not rec
+            and r.in_scene
+            and r.outcome not in ("harvested", "dropped")
+            and not self._ghost(r)
         ]
         hit = blockers(
             rec.planned,

@@ -127,3 +127,32 @@ def test_clearable_keeps_chains_and_drops_cycles_and_fruit_behind_one_that_stays
     assert clearable({1: {2}, 2: {1}, 3: set()}) == {3}
     assert clearable({1: {-1}, 2: {1}, 3: set()}) == {3}
     assert clearable({}) == set()
+
+
+def test_a_stale_second_track_of_a_harvested_fruit_is_no_neighbour_nor_candidate() -> None:
+    # Track 7 lost B (last seen 20 frames ago), track 8 took B over 5 cm away (too far for the
+    # book to merge them) and B was harvested: track 7 is listed where B hung.
+    b_again = (B[0], B[1] + 0.05, B[2])
+    core = core_with("nearest", fruit(1, A, 0.5), fruit(8, b_again, 0.6), fruit(3, C, 0.7))
+    core.book.update(
+        SceneState(
+            header=Header(stamp_ns=1, seq=1, source="scene"),
+            fruits=(
+                fruit(1, A, 0.5),
+                fruit(7, B, 0.6).model_copy(update={"frames_unseen": 20}),
+                fruit(8, b_again, 0.6),
+                fruit(3, C, 0.7),
+            ),
+            trunk=Trunk(found=False),
+            obstacles=Obstacles(),
+        ),
+        lambda _f: False,
+    )
+    recs = core.book.records
+    assert sorted(recs) == [1, 3, 7, 8]
+    recs[7].reach = (OK, OK)
+    harvest(core, 8)
+    harvest(core, 3)
+    assert select(core) == 1  # not blocked by the stale track 7, which is not selected either
+    ps = core.machine.pose_settings
+    assert blockers(recs[1].planned, [recs[7].planned], ps, 0.0) == [0]  # where A's dish goes
