@@ -81,6 +81,7 @@ class FruitList:
         ``failed``: IDs detected without one (reason, e.g. depth_invalid). Returns notes (what
         was added, kept, forgotten) for the log."""
         notes: list[str] = []
+        measured = self._merge_duplicates(measured, notes)
         seen = set(measured) | set(failed)
         for fid, m in sorted(measured.items()):
             e = self.entries.get(fid)
@@ -95,7 +96,6 @@ class FruitList:
             if e is not None:  # kept from its last good state, flagged
                 e.frames_unseen, e.last_seen_stamp_ns = 0, stamp_ns
                 e.flags = _flags(e.state.flags, reason)
-        notes += self._merge_duplicates(stamp_ns)
         for fid in sorted(set(self.entries) - seen):
             e = self.entries[fid]
             e.frames_unseen += 1
@@ -106,25 +106,31 @@ class FruitList:
                 e.flags = _flags(e.state.flags, "stale")
         return notes
 
-    def _merge_duplicates(self, stamp_ns: int) -> list[str]:
-        """Drop the entries seen in this frame that are a second track of an older ID seen in
-        it too: stored states compared (with or without a good measurement this frame; a jump
-        kept out has not moved a state, so a track briefly on another fruit swallows nothing)."""
-        notes: list[str] = []
-        kept: list[Entry] = []
-        for fid in sorted(self.entries):
-            e = self.entries[fid]
-            if e.frames_unseen > 0 or e.last_seen_stamp_ns != stamp_ns:
-                continue
-            older = next((k for k in kept if self._same_fruit(e.state, k.state)), None)
+    def _merge_duplicates(
+        self, measured: dict[int, Measurement], notes: list[str]
+    ) -> dict[int, Measurement]:
+        """Drop the measurements of IDs that are a second track of an older ID measured in the
+        same frame (and the newer ID's entry, listed before the two overlapped)."""
+        kept: dict[int, Measurement] = {}
+        for fid, m in sorted(measured.items()):
+            older = next(
+                (k for k, o in kept.items() if self._same_fruit(m, o) and self._takes(k, o)),
+                None,
+            )
             if older is None:
-                kept.append(e)
+                kept[fid] = m
                 continue
-            del self.entries[fid]
-            if self.duplicate_of.get(fid) != older.fruit_id:
-                self.duplicate_of[fid] = older.fruit_id
-                notes.append(f"fruit {fid} is fruit {older.fruit_id} under a second track ID")
-        return notes
+            self.entries.pop(fid, None)
+            if self.duplicate_of.get(fid) != older:
+                self.duplicate_of[fid] = older
+                notes.append(f"fruit {fid} is fruit {older} under a second track ID: merged")
+        return kept
+
+    def _takes(self, fid: int, m: Measurement) -> bool:
+        """The entry of ``fid`` takes ``m`` as its state (not a jump kept out: a track that
+        briefly lands on another fruit does not swallow that fruit's own track)."""
+        e = self.entries.get(fid)
+        return e is None or _dist(m, e.state) <= self.p.update_threshold_m
 
     def _same_fruit(self, a: Measurement, b: Measurement) -> bool:
         share = self.p.same_fruit_share * (a.semi_axis_h_m + b.semi_axis_h_m)

@@ -120,11 +120,3 @@ def test_neighbours_and_a_track_briefly_on_another_fruit_are_not_merged() -> Non
     assert sorted(fl.entries) == [3, 4]
     fl.step(1, {3: m(0.68), 4: m(0.68)}, {})  # track 3 lands on fruit 4 for a frame
     assert sorted(fl.entries) == [3, 4] and fl.entries[3].state.position_world_m[0] == 0.6
-
-
-def test_a_second_track_is_merged_while_the_older_one_has_only_a_cut_view() -> None:
-    # During a harvest the arms cut the older track's box: it keeps its state, still seen.
-    fl = FruitList(ListParams())
-    fl.step(0, {3: m(0.6)}, {})
-    fl.step(1, {8: m(0.605)}, {3: "border_cut"})
-    assert sorted(fl.entries) == [3] and fl.duplicate_of == {8: 3}
