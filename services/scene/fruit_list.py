@@ -6,13 +6,10 @@ smaller than a threshold, otherwise the previous state is kept. This ensures a r
 counter temporary ID errors caused by occlusions. We delete IDs if they are not detected in the
 scene for 100 image frames. Finally, we select the ID with smallest distance for harvesting."
 
-Two additions. One fruit measured under two track IDs in the same frame (the tracker keeps a
-second track on it; the two estimates overlap more than two fruit can, ``same_fruit_share``) is
-listed once, under the older ID: a second entry would be a phantom neighbour that the planner
-counts in its own target's way and the controller keeps its tools away from. And a fruit that
-really moved (a hand moved it while it was hidden) would be stuck at its old place forever
-under the paper's rule, so a jump that the next ``accept_jump_frames`` measurements confirm
-(all within the threshold of each other) is accepted (0: never, the paper's rule).
+One addition: a fruit that really moved (a hand moved it while it was hidden) would be stuck at
+its old place forever under the paper's rule, so a jump that the next ``accept_jump_frames``
+measurements confirm (all within the threshold of each other) is accepted (0: never, the
+paper's rule).
 """
 
 from __future__ import annotations
@@ -59,7 +56,6 @@ class ListParams:
     update_threshold_m: float = 0.04
     forget_after_frames: int = 100
     accept_jump_frames: int = 15
-    same_fruit_share: float = 0.8  # centres closer than this share of d_h + d_h: one fruit
 
 
 class FruitList:
@@ -69,7 +65,6 @@ class FruitList:
         self.p = p
         self.entries: dict[int, Entry] = {}
         self.marks: dict[int, Mark] = {}  # kept after an entry is forgotten: IDs are not reused
-        self.duplicate_of: dict[int, int] = {}  # ID → the older ID it was last merged into
 
     def step(
         self,
@@ -81,7 +76,6 @@ class FruitList:
         ``failed``: IDs detected without one (reason, e.g. depth_invalid). Returns notes (what
         was added, kept, forgotten) for the log."""
         notes: list[str] = []
-        measured = self._merge_duplicates(measured, notes)
         seen = set(measured) | set(failed)
         for fid, m in sorted(measured.items()):
             e = self.entries.get(fid)
@@ -105,36 +99,6 @@ class FruitList:
             else:
                 e.flags = _flags(e.state.flags, "stale")
         return notes
-
-    def _merge_duplicates(
-        self, measured: dict[int, Measurement], notes: list[str]
-    ) -> dict[int, Measurement]:
-        """Drop the measurements of IDs that are a second track of an older ID measured in the
-        same frame (and the newer ID's entry, listed before the two overlapped)."""
-        kept: dict[int, Measurement] = {}
-        for fid, m in sorted(measured.items()):
-            older = next(
-                (k for k, o in kept.items() if self._same_fruit(m, o) and self._takes(k, o)),
-                None,
-            )
-            if older is None:
-                kept[fid] = m
-                continue
-            self.entries.pop(fid, None)
-            if self.duplicate_of.get(fid) != older:
-                self.duplicate_of[fid] = older
-                notes.append(f"fruit {fid} is fruit {older} under a second track ID: merged")
-        return kept
-
-    def _takes(self, fid: int, m: Measurement) -> bool:
-        """The entry of ``fid`` takes ``m`` as its state (not a jump kept out: a track that
-        briefly lands on another fruit does not swallow that fruit's own track)."""
-        e = self.entries.get(fid)
-        return e is None or _dist(m, e.state) <= self.p.update_threshold_m
-
-    def _same_fruit(self, a: Measurement, b: Measurement) -> bool:
-        share = self.p.same_fruit_share * (a.semi_axis_h_m + b.semi_axis_h_m)
-        return _dist(a, b) < share
 
     def _update(self, e: Entry, m: Measurement) -> list[str]:
         jump = float(np.linalg.norm(m.position_world_m - e.state.position_world_m))

@@ -100,23 +100,3 @@ def test_marks_outlive_the_entry() -> None:
     assert fl.selected() is None
     fl.mark(1, "unreachable")  # a later skip does not undo a harvest
     assert fl.marks[1] == "harvested"
-
-
-def test_a_second_track_on_one_fruit_is_listed_once_under_the_older_id() -> None:
-    fl = FruitList(ListParams())
-    fl.step(0, {3: m(0.6), 5: m(0.9)}, {})
-    fl.step(1, {3: m(0.6), 5: m(0.9), 8: m(0.605, y=0.01)}, {})  # a second track on fruit 3
-    assert sorted(fl.entries) == [3, 5]
-    fl.step(2, {3: m(0.6), 8: m(0.6), 5: m(0.9)}, {})
-    assert sorted(fl.entries) == [3, 5] and fl.duplicate_of == {8: 3}
-    # Its own fruit once the older track is gone: the newer ID is listed again.
-    fl.step(3, {8: m(0.6), 5: m(0.9)}, {})
-    assert sorted(fl.entries) == [3, 5, 8]
-
-
-def test_neighbours_and_a_track_briefly_on_another_fruit_are_not_merged() -> None:
-    fl = FruitList(ListParams(update_threshold_m=0.04))
-    fl.step(0, {3: m(0.6), 4: m(0.68)}, {})  # touching fruit: 8 cm apart, d_h 4 cm
-    assert sorted(fl.entries) == [3, 4]
-    fl.step(1, {3: m(0.68), 4: m(0.68)}, {})  # track 3 lands on fruit 4 for a frame
-    assert sorted(fl.entries) == [3, 4] and fl.entries[3].state.position_world_m[0] == 0.6
