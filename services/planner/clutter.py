@@ -17,7 +17,7 @@ the damper's d_s and the hull): a fruit it calls blocked would be a stuck harves
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Mapping, Sequence
 
 import numpy as np
 
@@ -30,6 +30,12 @@ SHAFT_M = TOOLS.cutter_shaft_length_m + TOOLS.flange_gap_m  # tip → flange
 WRIST_M = 0.08  # the last link behind the flange
 SWEEP_SAMPLES = 7
 SAME_FRUIT_SHARE = 0.8  # centres closer than this share of d_h + d_h: one fruit, two tracks
+
+
+def same_fruit(a: FruitShape, b: FruitShape) -> bool:
+    """Two estimates overlapping more than two fruit can: one fruit seen as two tracks."""
+    d_m = float(np.linalg.norm(a.centre_world_m - b.centre_world_m))
+    return d_m < SAME_FRUIT_SHARE * (a.d_h_m + b.d_h_m)
 
 
 def _to_cylinder_m(p: np.ndarray, floor: np.ndarray) -> float:
@@ -56,8 +62,8 @@ def blockers(
     out = []
     for i, f in enumerate(others):
         c = f.centre_world_m
-        if np.linalg.norm(c - target.centre_world_m) < SAME_FRUIT_SHARE * (f.d_h_m + target.d_h_m):
-            continue  # two fruit cannot overlap: a second track of the target itself
+        if same_fruit(f, target):
+            continue  # a second track of the target itself
         r = max(f.d_h_m, f.d_v_m) + clearance_m
         hit = False
         for t in np.linspace(0.0, 1.0, SWEEP_SAMPLES):
@@ -77,3 +83,18 @@ def blockers(
         if hit:
             out.append(i)
     return out
+
+
+def clearable(blocked_by: Mapping[int, Collection[int]]) -> set[int]:
+    """The keys that can all be harvested in some order that takes every blocker first: the
+    fixpoint from the free ones. A blocker that is not a key stays (it is never cleared); keys
+    blocking each other in a cycle are never cleared either."""
+    done: set[int] = set()
+    changed = True
+    while changed:
+        changed = False
+        for k in sorted(blocked_by):
+            if k not in done and set(blocked_by[k]) <= done:
+                done.add(k)
+                changed = True
+    return done

@@ -34,7 +34,7 @@ from schemas.control import ControlStatus, HarvestPhase
 from schemas.harvest import FruitOutcome, HarvestEventKind
 from services.planner import Settings
 from services.planner.book import FruitBook, FruitRecord
-from services.planner.clutter import blockers
+from services.planner.clutter import blockers, clearable, same_fruit
 from services.planner.kinematics import Kinematics
 from services.planner.order import nearest_first, planned_order
 from services.planner.poses import PoseSettings, ToolPoses, harvest_pose, pre_pose
@@ -305,7 +305,7 @@ class Machine:
 
     # ---- selection ---------------------------------------------------------------------------
     def _candidates(self) -> list[FruitRecord]:
-        return self.book.candidates(self.s.lost_after_frames)
+        return [r for r in self.book.candidates(self.s.lost_after_frames) if not self._ghost(r)]
 
     def _select(self, now: int) -> None:
         """The next fruit by the policy. Before committing: the IK must reach its poses
@@ -333,7 +333,14 @@ class Machine:
         self._enter("approach", now)
 
     def _nearest_pick(self, cands: list[FruitRecord], now: int) -> tuple[FruitRecord, str] | None:
-        """The nearest candidate that can be harvested now; None: the candidates changed."""
+        """The nearest candidate that can be harvested now; None: the candidates changed.
+
+        A blocked fruit waits (deferred, once) and the next one is tried: a blocker may be
+        harvested later, even one that was itself deferred (a chain: C blocks B blocks A). Only
+        when every candidate is blocked and already waited is the nearest given up: nothing is
+        left that could clear the way."""
+        first_blocked: tuple[FruitRecord, list[FruitRecord]] | None = None
+        newly_deferred = False
         for i in nearest_first([r.seen.distance_m for r in cands]):
             rec = cands[i]
             if not self._check_reach(rec, now):
@@ -341,38 +348,59 @@ class Machine:
             blocking = self._blockers(rec)
             if not blocking:
                 return rec, f"nearest ({rec.seen.distance_m:.3f} m from the camera)"
-            others = [r for r in cands if r is not rec and not r.deferred]
-            self._blocked(rec, blocking, now, wait=bool(others))
-            if rec.finished or not others:
-                return None
+            first_blocked = first_blocked or (rec, blocking)
+            if not rec.deferred:
+                self._blocked(rec, blocking, now, wait=True)
+                newly_deferred = True
+        if first_blocked is not None and not newly_deferred:
+            self._blocked(*first_blocked, now, wait=False)
         return None
 
     def _planned_pick(self, cands: list[FruitRecord], now: int) -> tuple[FruitRecord, str] | None:
         """The first fruit of the shortest order that harvests every blocker before the fruit
-        it blocks; None: the candidates changed."""
+        it blocks; None: the candidates changed.
+
+        A fruit blocked by one that is still to do but not a candidate now (waiting after a
+        stuck attempt) waits too; one that no order can clear (blocked by a fruit that stays,
+        or in a cycle of blockers) is given up."""
         for r in cands:
             self._check_reach(r, now)
         ok = [r for r in cands if not r.finished]
         if len(ok) != len(cands):
             return None
         index = {r.key: i for i, r in enumerate(ok)}
-        before: list[tuple[int, int]] = []
-        for j, r in enumerate(ok):
-            blocking = self._blockers(r)
-            staying = [b for b in blocking if b.key not in index]
-            if staying:
-                self._blocked(r, staying, now, wait=False)
+        blocking = [self._blockers(r) for r in ok]
+        for r, bl in zip(ok, blocking, strict=True):
+            waiting = [b for b in bl if b.key not in index and not b.finished]
+            if waiting and not r.deferred:
+                self._blocked(r, waiting, now, wait=True)
                 return None
-            before += [(index[b.key], j) for b in blocking]
+        # -1: a blocker that is not a candidate stays where it is
+        blocked_by = {j: {index.get(b.key, -1) for b in bl} for j, bl in enumerate(blocking)}
+        can = clearable(blocked_by)
+        if len(can) != len(ok):
+            for j in sorted(set(blocked_by) - can):
+                self._blocked(ok[j], blocking[j], now, wait=False)
+            return None
+        before = [(i, j) for j, bl in blocked_by.items() for i in sorted(bl)]
         pts = np.array([pre_pose(r.planned, self.pose_settings).tip_world_m for r in ok])
         start = self.last_tip_world_m if self.last_tip_world_m is not None else self._ready_tip()
         order = planned_order(start, pts, self._ready_tip(), self.s.planned_exact_max, before)
         rec = ok[order[0]]
-        if self._blockers(rec):  # the precedences could not all hold (blockers in a cycle)
-            self._blocked(rec, self._blockers(rec), now, wait=False)
-            return None
         return rec, f"planned order ({len(ok)} fruit): " + " → ".join(
             str(ok[i].fruit_id) for i in order
+        )
+
+    def _ghost(self, rec: FruitRecord) -> bool:
+        """A record not seen now that overlaps a fruit known to be off the tree (harvested,
+        dropped) is that fruit under another track ID, listed where it hung until the scene
+        forgets it: neither a candidate nor a neighbour in the way."""
+        if rec.seen.frames_unseen == 0 or rec.outcome in ("harvested", "dropped"):
+            return False
+        return any(
+            same_fruit(rec.planned, r.planned)
+            for r in self.book.detected()
+            if r is not rec and r.outcome in ("harvested", "dropped")
         )
 
     def _blockers(self, rec: FruitRecord) -> list[FruitRecord]:
@@ -380,7 +408,10 @@ class Machine:
         present = [
             r
             for r in self.book.detected()
-            if r is not rec and r.in_scene and r.outcome not in ("harvested", "dropped")
+            if r is not rec
+            and r.in_scene
+            and r.outcome not in ("harvested", "dropped")
+            and not self._ghost(r)
         ]
         hit = blockers(
             rec.planned,
