@@ -101,6 +101,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     h.add_argument("--fruit-count", type=int, help="random fruit per tree (sim fruit_count)")
     h.add_argument("--mode", choices=["inproc", "stack"], default="inproc", help="how to run")
     h.add_argument("--max-s", type=float, default=240.0, help="sim seconds per run at most")
+    h.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="SERVICE.KEY=VALUE",
+        help="override a service's setting for the run (sim, detector, tracker, scene, "
+        "controller, planner), e.g. scene.occupancy=false; repeatable",
+    )
     h.add_argument("--json", action="store_true", help="print one JSON object")
     h.set_defaults(func=cmd_bench_harvest)
 
@@ -160,6 +168,7 @@ def cmd_bench_harvest(args: argparse.Namespace) -> int:
         BenchConfig,
         BenchError,
         parse_seeds,
+        parse_sets,
         run_harvest_bench,
         table,
     )
@@ -172,6 +181,7 @@ def cmd_bench_harvest(args: argparse.Namespace) -> int:
             args.fruit_count,
             args.mode,
             args.max_s,
+            settings=parse_sets(args.set),
         )
         bad = [o for o in cfg.orders if o not in ("nearest", "planned")]
         if bad:

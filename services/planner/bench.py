@@ -33,6 +33,7 @@ from schemas.scene import SceneState
 from schemas.sim import GroundTruth
 
 CHAIN = ("detector", "tracker", "scene")
+SETTABLE = ("sim", *CHAIN, "controller", "planner")  # services a run's --set may reach
 MATCH_M = 0.06  # a track's last scene position within this of a sim fruit is that fruit
 
 
@@ -96,6 +97,35 @@ def parse_seeds(text: str) -> list[int]:
     return out
 
 
+def parse_sets(items: Sequence[str]) -> dict[str, dict[str, Any]]:
+    """``["scene.occupancy=false"]`` → ``{"scene": {"occupancy": False}}`` (values parsed as
+    YAML), each service's block validated by its Settings; a BenchError names the bad item."""
+    from services.registry import service_def
+    from services.runtime.settings import SettingsError, load_settings, parse_overrides
+
+    out: dict[str, dict[str, Any]] = {}
+    for item in items:
+        key = item.split("=", 1)[0].strip()
+        service, _, leaf = key.partition(".")
+        if "=" not in item or not leaf or "." in leaf:
+            raise BenchError(
+                f"--set {item!r}: expected SERVICE.KEY=VALUE, e.g. scene.occupancy=false"
+            )
+        if service not in SETTABLE:
+            raise BenchError(f"--set {item!r}: unknown service {service!r} ({', '.join(SETTABLE)})")
+        try:
+            value = parse_overrides([f"{leaf}={item.split('=', 1)[1]}"])[leaf]
+        except Exception as exc:  # a YAML syntax error in the value
+            raise BenchError(f"--set {item!r}: {exc}") from None
+        out.setdefault(service, {})[leaf] = value
+    for service, block in out.items():
+        try:
+            load_settings(service_def(service).settings, block, service=service)
+        except SettingsError as exc:
+            raise BenchError(f"--set {service}.*: {exc}") from None
+    return out
+
+
 # ---- one run, in process -------------------------------------------------------------------
 NodeFactory = Callable[[], list[Any]]  # → InprocNode list standing between sim and controller
 
@@ -156,10 +186,15 @@ def run_inproc(
 
 # ---- one run, as the real stack -------------------------------------------------------------
 def run_stack(
-    sim_settings: dict[str, Any], planner_settings: dict[str, Any], workdir: Path, run_id: str
+    sim_settings: dict[str, Any],
+    planner_settings: dict[str, Any],
+    workdir: Path,
+    run_id: str,
+    settings: dict[str, dict[str, Any]] | None = None,
 ) -> tuple[Collected, float, float]:
     """One run of the real stack (supervisor, processes, bus, recorder); evaluated from the
-    recording. Endpoint: a unix socket in ``workdir``."""
+    recording. Endpoint: a unix socket in ``workdir``. ``settings``: the chain's and the
+    controller's blocks (by service)."""
     import yaml
 
     from schemas.topics import TOPICS
@@ -178,8 +213,13 @@ def run_stack(
                 "recording": {"enabled": True, "dir": str(workdir)},
                 "services": {
                     "sim": {"settings": sim_settings},
-                    **{n: {} for n in CHAIN},
-                    "controller": {"settings": {"publish_diagnostics": False}},
+                    **{n: {"settings": (settings or {}).get(n, {})} for n in CHAIN},
+                    "controller": {
+                        "settings": {
+                            "publish_diagnostics": False,
+                            **(settings or {}).get("controller", {}),
+                        }
+                    },
                     "planner": {"main": True, "settings": planner_settings},
                 },
             }
@@ -362,23 +402,30 @@ class BenchConfig:
     mode: str = "inproc"
     max_s: float = 240.0
     perception: NodeFactory | None = None  # tests: a stand-in chain
+    settings: dict[str, dict[str, Any]] = field(default_factory=dict)  # --set, by service
 
 
 def run_harvest_bench(
     cfg: BenchConfig, progress: Callable[[str], None] | None = None
 ) -> dict[str, Any]:
     runs: list[dict[str, Any]] = []
+    sets = cfg.settings
+    perception = cfg.perception or (lambda: perception_chain(sets))
     workdir = Path(tempfile.mkdtemp(prefix="bench-harvest-"))
     for order in cfg.orders:
         for seed in cfg.seeds:
             sim_s: dict[str, Any] = {"scenario": cfg.scenario, "seed": seed}
             if cfg.fruit_count is not None:
                 sim_s["fruit_count"] = cfg.fruit_count
+            sim_s.update(sets.get("sim", {}))
             plan_s = {"order": order, "scenario": cfg.scenario, "seed": seed}
+            plan_s.update(sets.get("planner", {}))
             if cfg.mode == "stack":
-                got, sim_t, wall = run_stack(sim_s, plan_s, workdir, f"{order}-{seed}")
+                got, sim_t, wall = run_stack(sim_s, plan_s, workdir, f"{order}-{seed}", sets)
             else:
-                got, sim_t, wall = run_inproc(sim_s, plan_s, cfg.max_s, cfg.perception)
+                got, sim_t, wall = run_inproc(
+                    sim_s, plan_s, cfg.max_s, perception, sets.get("controller")
+                )
             row = {"order": order, "seed": seed, "sim_s": round(sim_t, 3), "wall_s": round(wall, 2)}
             row["rtf"] = round(sim_t / wall, 3) if wall > 0 else None
             row.update(evaluate(got, _first_truth(sim_s), plan_s))
@@ -394,6 +441,7 @@ def run_harvest_bench(
         "seeds": cfg.seeds,
         "mode": cfg.mode,
         "fruit_count": cfg.fruit_count,
+        "settings": sets,
         "policies": {o: aggregate([r for r in runs if r["order"] == o]) for o in cfg.orders},
         "runs": runs,
     }

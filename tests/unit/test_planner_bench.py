@@ -8,7 +8,14 @@ from pathlib import Path
 
 import pytest
 
-from services.planner.bench import BenchConfig, BenchError, parse_seeds, run_harvest_bench
+from services.planner import bench
+from services.planner.bench import (
+    BenchConfig,
+    BenchError,
+    parse_seeds,
+    parse_sets,
+    run_harvest_bench,
+)
 from services.runtime.inproc import InprocNode
 from tests.harvest_helpers import TruthScene, lab_scenario
 from tests.helpers import harvest
@@ -43,3 +50,39 @@ def test_seed_ranges_and_bad_arguments() -> None:
         parse_seeds("5-3")
     r = harvest("bench", "harvest", "--seeds", "x", timeout=60)
     assert r.returncode == 2 and "--seeds" in r.stderr
+
+
+def test_set_refuses_a_bad_key_naming_it() -> None:
+    with pytest.raises(BenchError, match="occupancy_typo"):
+        parse_sets(["scene.occupancy_typo=1"])
+    with pytest.raises(BenchError, match="occupancy_voxel_m"):
+        parse_sets(["scene.occupancy_voxel_m=not-a-number"])
+    with pytest.raises(BenchError, match="nosuchservice"):
+        parse_sets(["nosuchservice.x=1"])
+    with pytest.raises(BenchError, match=r"SERVICE\.KEY=VALUE"):
+        parse_sets(["occupancy=false"])
+    r = harvest("bench", "harvest", "--set", "scene.occupancy_typo=1", timeout=60)
+    assert r.returncode == 2 and "occupancy_typo" in r.stderr
+
+
+def test_set_reaches_the_cores(monkeypatch: pytest.MonkeyPatch) -> None:
+    sets = parse_sets(
+        ["scene.occupancy=false", "controller.rel_gain_per_s=4", "planner.approach_distance_m=0.12"]
+    )
+    assert sets["scene"] == {"occupancy": False}
+    seen: dict[str, object] = {}
+
+    class Stop(Exception):
+        pass
+
+    def fake_run(sim_s, plan_s, max_s, perception, controller_settings):  # type: ignore[no-untyped-def]
+        seen.update(plan=plan_s, ctrl=controller_settings, chain=perception())
+        raise Stop
+
+    monkeypatch.setattr(bench, "run_inproc", fake_run)
+    with pytest.raises(Stop):
+        run_harvest_bench(BenchConfig("paper-exp1", [11], ("nearest",), settings=sets))
+    scene = next(n for n in seen["chain"] if n.name == "scene")  # type: ignore[attr-defined]
+    assert scene.core.s.occupancy is False and scene.core.occupancy is None
+    assert seen["ctrl"] == {"rel_gain_per_s": 4}
+    assert seen["plan"]["approach_distance_m"] == 0.12 and seen["plan"]["order"] == "nearest"  # type: ignore[index]
