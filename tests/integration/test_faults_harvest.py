@@ -21,6 +21,7 @@ import pytest
 
 from schemas import TOPICS
 from services.bus import Bus, BusSettings
+from services.supervisor.bench import harvest_stack_yaml
 from tests.harvest_helpers import lab_scenario
 from tests.helpers import payloads_by_topic, short_dir, start_harvest, wait_until
 
@@ -28,7 +29,6 @@ pytestmark = pytest.mark.integration
 
 FRUIT = {"position_world_m": [0.6, -0.12, 1.32], "radius_m": 0.04, "leaf_cover": "none"}
 FRUIT2 = {"position_world_m": [0.7, 0.05, 1.25], "radius_m": 0.04, "leaf_cover": "none"}
-FAST = "{policy: on-failure, max_restarts: 3, backoff_s: 0.05}"
 PERCEPTION = ("detector", "tracker", "scene")
 
 
@@ -43,25 +43,9 @@ def d() -> Iterator[Path]:
 
 
 def harvest_stack(d: Path, scenario: Path) -> Path:
-    """The harvest of deploy/stack.yaml on a small tree, every service restarted on failure."""
+    """The fault benchmark's harvest stack (every service restarted on failure), as a file."""
     path = d / "harvest-faults.yaml"
-    path.write_text(f"""
-name: harvest-faults
-mode: lockstep
-master: sim
-recording: {{enabled: true, dir: {d / "rec"}, restart: {FAST}}}
-services:
-  sim:
-    settings: {{scenario: {scenario}, seed: 5, duration_s: 90.0}}
-  detector: {{restart: {FAST}}}
-  tracker: {{restart: {FAST}}}
-  scene: {{restart: {FAST}}}
-  controller: {{restart: {FAST}}}
-  planner:
-    main: true
-    restart: {FAST}
-    settings: {{finish_after_s: 0.5}}
-""")
+    path.write_text(harvest_stack_yaml(d, scenario))
     return path
 
 
