@@ -48,6 +48,7 @@ class Collected:
     summary: RunSummary | None = None
     truth: GroundTruth | None = None  # the last one
     last_position: dict[int, tuple[float, float, float]] = field(default_factory=dict)
+    first_position: dict[int, tuple[float, float, float]] = field(default_factory=dict)
     sim_events: list[Any] = field(default_factory=list)
     harvest_events: list[Any] = field(default_factory=list)
     max_velocity_ratio: float = 0.0  # |q̇| / limit over every command
@@ -62,6 +63,7 @@ class Collected:
             for f in s.fruits:
                 if f.frames_unseen == 0:
                     self.last_position[f.fruit_id] = f.position_world_m
+                    self.first_position.setdefault(f.fruit_id, f.position_world_m)
         elif topic == "sim/events":
             self.sim_events.append(msg)
         elif topic == "harvest/events":
@@ -308,6 +310,17 @@ def _sim_fruit(p: Any, centres: dict[int, np.ndarray]) -> int | None:
     return i if d[i] <= MATCH_M else None
 
 
+def _track_fruit(got: Collected, track_id: int, centres: dict[int, np.ndarray]) -> int | None:
+    """The sim fruit a track was on: by its last fresh position, else by its first (a harvested
+    fruit's track last seen in the dish or falling is the fruit it was on where it hung)."""
+    for seen in (got.last_position, got.first_position):
+        p = seen.get(track_id)
+        i = None if p is None else _sim_fruit(p, centres)
+        if i is not None:
+            return i
+    return None
+
+
 TARGET_ENDS = ("fruit_collected", "fruit_dropped", "fruit_skipped", "fruit_lost", "run_finished")
 
 
@@ -317,7 +330,7 @@ def _contacts(got: Collected, centres: dict[int, np.ndarray]) -> dict[str, int]:
     dish under it) and with anything else (trunk, branches, leaves' twigs, other fruit, the
     robot itself): the latter are the collisions."""
     to_sim = {
-        tid: i for tid, p in got.last_position.items() if (i := _sim_fruit(p, centres)) is not None
+        tid: i for tid in got.last_position if (i := _track_fruit(got, tid, centres)) is not None
     }
     windows: list[tuple[int, int, int]] = []  # (start ns, end ns, sim fruit)
     current: tuple[int, int] | None = None  # (start ns, sim fruit)
@@ -353,8 +366,7 @@ def evaluate(
     centres = {f.fruit_id: np.array(f.position_world_m) for f in first_truth.fruits}
     outcome: dict[int, str] = {}  # sim fruit → the planner's outcome
     for r in s.fruits if s is not None else ():
-        p = got.last_position.get(r.fruit_id)
-        i = None if p is None else _sim_fruit(p, centres)
+        i = _track_fruit(got, r.fruit_id, centres)
         if i is not None:
             outcome.setdefault(i, r.outcome)
     collected = {e.fruit_id for e in got.sim_events if e.kind == "collected"}

@@ -36,6 +36,7 @@ def test_bench_judges_a_run_against_the_truth(tmp_path: Path) -> None:
     assert (run["harvested"], run["harvested_reachable"], run["success_rate"]) == (2, 2, 1.0)
     assert (run["unreachable_reported"], run["unreachable_correct"]) == (1, 1)
     assert run["reachable_called_unreachable"] == 0 and run["collisions"] == 0
+    assert run["detected"] == 3
     assert 0 < run["max_velocity_ratio"] <= 1.0
     pol = res["policies"]["planned"]
     assert len(run["cycles_s"]) == 2
@@ -86,3 +87,18 @@ def test_set_reaches_the_cores(monkeypatch: pytest.MonkeyPatch) -> None:
     assert scene.core.s.occupancy is False and scene.core.occupancy is None
     assert seen["ctrl"] == {"rel_gain_per_s": 4}
     assert seen["plan"]["approach_distance_m"] == 0.12 and seen["plan"]["order"] == "nearest"  # type: ignore[index]
+
+
+def test_a_track_is_matched_to_the_fruit_where_it_hung() -> None:
+    """A harvested fruit's track is last seen in the dish (no fruit there): it is still the
+    fruit it was first seen on; a track last seen on a fruit is that fruit."""
+    import numpy as np
+
+    centres = {0: np.array([0.6, 0.0, 1.3]), 1: np.array([0.6, 0.2, 1.3])}
+    got = bench.Collected()
+    got.first_position = {7: (0.6, 0.01, 1.3), 8: (0.6, 0.0, 1.3), 9: (0.3, 0.0, 0.9)}
+    got.last_position = {7: (0.45, 0.1, 1.0), 8: (0.6, 0.19, 1.3), 9: (0.3, 0.0, 0.9)}
+    assert bench._track_fruit(got, 7, centres) == 0  # last seen in the dish
+    assert bench._track_fruit(got, 8, centres) == 1  # the last sighting wins when it matches
+    assert bench._track_fruit(got, 9, centres) is None  # never near a fruit
+    assert bench._track_fruit(got, 10, centres) is None  # never seen
