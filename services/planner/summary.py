@@ -1,11 +1,69 @@
-"""The run summary (harvest/summary): one FruitResult per physical fruit, and the totals."""
+"""The run summary (harvest/summary): one FruitResult per physical fruit, and the totals.
+
+The book keeps one record per track identity it could not tie to another; at the end of the
+run, what the run has shown is used to fold records that were one fruit:
+
+* a record never attempted and still to do that overlaps another record (``same_fruit``) is
+  that fruit under a second track (a twin, or an ID the tracker moved after a harvest);
+* a fruit reported dropped (not in the basket after the cut, not seen on its branch) that is
+  harvested later where it hung was not dropped: the cut missed (the tools hid it) and the
+  harvest supersedes the verdict; its time and cuts add up.
+"""
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 from schemas.base import Header
 from schemas.harvest import FruitResult, RunSummary
 from services.planner import Settings
-from services.planner.book import FruitBook
+from services.planner.book import FruitBook, FruitRecord
+from services.planner.clutter import same_fruit
+
+
+@dataclass
+class PhysicalFruit:
+    """One fruit of the summary: its last record, and the time and cuts of every record."""
+
+    rec: FruitRecord
+    started_ns: int | None
+    spent_ns: int
+    cuts: int
+
+
+def physical_fruit(records: list[FruitRecord]) -> list[PhysicalFruit]:
+    """The records folded into physical fruit (module docstring), in the records' order."""
+    out = {r.key: PhysicalFruit(r, r.started_ns, r.spent_ns, r.cuts) for r in records}
+    for r in records:
+        if (
+            r.outcome is None
+            and r.started_ns is None
+            and any(
+                o.key in out and o is not r and same_fruit(o.planned, r.planned) for o in records
+            )
+        ):
+            del out[r.key]  # a second track of a fruit listed on its own
+    for d in records:
+        if d.outcome != "dropped" or d.finished_ns is None:
+            continue
+        later = [
+            o
+            for o in records
+            if o.outcome == "harvested"
+            and o.key in out
+            and o.started_ns is not None
+            and o.started_ns >= d.finished_ns
+            and same_fruit(o.planned, d.planned)
+        ]
+        if later:
+            h = out[later[0].key]
+            h.started_ns, h.spent_ns, h.cuts = (
+                d.started_ns,
+                h.spent_ns + d.spent_ns,
+                h.cuts + d.cuts,
+            )
+            del out[d.key]
+    return [out[r.key] for r in records if r.key in out]
 
 
 def run_summary(
@@ -13,18 +71,18 @@ def run_summary(
 ) -> RunSummary:
     """Fruit never attempted keep the outcome 'pending' (e.g. the run time limit came first)."""
     results = []
-    for rec in book.detected():
-        started, finished = rec.started_ns, rec.finished_ns
-        duration = rec.spent_ns * 1e-9 if started is not None else None
+    for f in physical_fruit(book.detected()):
+        rec = f.rec
+        duration = f.spent_ns * 1e-9 if f.started_ns is not None else None
         results.append(
             FruitResult(
                 fruit_id=rec.fruit_id,
                 outcome=rec.outcome or "pending",
                 reason=rec.reason,
-                started_ns=started,
-                finished_ns=finished,
+                started_ns=f.started_ns,
+                finished_ns=rec.finished_ns,
                 duration_s=duration,
-                cuts=rec.cuts,
+                cuts=f.cuts,
             )
         )
 

@@ -1,0 +1,73 @@
+"""The run summary folds the book's records into physical fruit: a pending second track of a
+listed fruit, and a 'dropped' verdict superseded by a later harvest where the fruit hung."""
+
+from __future__ import annotations
+
+from services.planner.book import FruitRecord, shape_of
+from services.planner.summary import physical_fruit
+from tests.unit.test_planner_book import fruit
+
+S = 1_000_000_000
+
+
+def record(key: int, p: tuple[float, float, float], **kw: object) -> FruitRecord:
+    f = fruit(key, p)
+    return FruitRecord(key, key, [key], f, shape_of(f), **kw)  # type: ignore[arg-type]
+
+
+def test_a_pending_second_track_of_a_listed_fruit_is_not_another_fruit() -> None:
+    done = record(1, (0.6, 0.0, 1.3), outcome="harvested", started_ns=S, spent_ns=3 * S)
+    twin = record(2, (0.6, 0.03, 1.3))  # 3 cm off: one fruit (two centres are ≥ 7 cm apart)
+    other = record(3, (0.6, 0.2, 1.3))  # a fruit of its own, never attempted
+    got = physical_fruit([done, twin, other])
+    assert [f.rec.key for f in got] == [1, 3]
+
+
+def test_pending_twins_are_one_fruit_not_none() -> None:
+    a, b = record(1, (0.6, 0.0, 1.3)), record(2, (0.6, 0.02, 1.3))
+    assert [f.rec.key for f in physical_fruit([a, b])] == [2]
+
+
+def test_a_fruit_harvested_where_it_was_reported_dropped_was_not_dropped() -> None:
+    first = record(
+        1,
+        (0.6, 0.0, 1.3),
+        outcome="dropped",
+        started_ns=9 * S,
+        finished_ns=22 * S,
+        spent_ns=13 * S,
+        cuts=1,
+    )
+    later = record(
+        77,
+        (0.6, 0.035, 1.29),
+        outcome="harvested",
+        started_ns=39 * S,
+        finished_ns=43 * S,
+        spent_ns=4 * S,
+        cuts=1,
+    )
+    (f,) = physical_fruit([first, later])
+    assert f.rec is later and (f.started_ns, f.spent_ns, f.cuts) == (9 * S, 17 * S, 2)
+
+
+def test_a_dropped_fruit_elsewhere_or_before_the_drop_keeps_its_verdict() -> None:
+    dropped = record(1, (0.6, 0.0, 1.3), outcome="dropped", started_ns=9 * S, finished_ns=22 * S)
+    far = record(2, (0.6, 0.15, 1.3), outcome="harvested", started_ns=30 * S)
+    earlier = record(3, (0.6, 0.03, 1.3), outcome="harvested", started_ns=1 * S)
+    got = physical_fruit([dropped, far, earlier])
+    assert [f.rec.outcome for f in got] == ["dropped", "harvested", "harvested"]
+
+
+def test_a_track_forgotten_before_any_attempt_ends_lost_one_in_view_pending() -> None:
+    from tests.unit.test_planner_select import core_with
+    from tests.unit.test_planner_select import fruit as seen_fruit
+
+    core = core_with(
+        "nearest", seen_fruit(1, (0.6, 0.0, 1.3), 0.5), seen_fruit(2, (0.6, 0.2, 1.3), 0.6)
+    )
+    recs = core.book.records
+    recs[2].in_scene = False  # the scene forgot it (a fruit moving in the dish, say)
+    core.machine._end_run(5 * S, "run time limit")
+    assert recs[1].outcome is None  # still in view, never attempted: pending in the summary
+    assert recs[2].outcome == "lost" and "before it was attempted" in recs[2].reason
