@@ -117,14 +117,6 @@ class Settings(ServiceSettings):
         "are off by a few mm: any margin here blocked fruit that the arms do reach (a near miss "
         "costs a 'no progress' retry, not a collision: the controller's dampers keep d_s), m.",
     )
-    attempt_blocked: bool = Field(
-        default=True,
-        description="A fruit blocked by neighbours that no order can clear (a neighbour given "
-        "up, or blockers in a cycle) is attempted once anyway, after every other fruit, before "
-        "it is given up: the blocking check is conservative (the dish's hull, the fruit's "
-        "largest semi-axis, estimates off by centimetres) and the controller's dampers keep d_s "
-        "from the neighbours, so a failed attempt ends as 'no progress', not as a collision.",
-    )
     defer_blocked: bool = Field(
         default=True,
         description="A fruit whose approach or harvest stops making progress is put back once "

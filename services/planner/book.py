@@ -57,7 +57,6 @@ class FruitRecord:
     attempt_ns: int | None = None  # start of the current attempt
     spent_ns: int = 0  # sim time the tools spent on it, over every attempt
     deferred: bool = False  # blocked once: retried when nothing else is left
-    forced: bool = False  # attempted once despite blockers that stay (attempt_blocked)
     cuts: int = 0
     losses: int = 0
     frozen: bool = False  # cutting or leaving: the planning position no longer follows the scene

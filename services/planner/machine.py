@@ -337,8 +337,8 @@ class Machine:
 
         A blocked fruit waits (deferred, once) and the next one is tried: a blocker may be
         harvested later, even one that was itself deferred (a chain: C blocks B blocks A). Only
-        when every candidate is blocked and already waited is the nearest attempted once anyway
-        (``attempt_blocked``), then given up: nothing is left that could clear the way."""
+        when every candidate is blocked and already waited is the nearest given up: nothing is
+        left that could clear the way."""
         first_blocked: tuple[FruitRecord, list[FruitRecord]] | None = None
         newly_deferred = False
         for i in nearest_first([r.seen.distance_m for r in cands]):
@@ -353,10 +353,7 @@ class Machine:
                 self._blocked(rec, blocking, now, wait=True)
                 newly_deferred = True
         if first_blocked is not None and not newly_deferred:
-            rec, blocking = first_blocked
-            if self._force(rec):
-                return rec, self._forced_why(blocking)
-            self._blocked(rec, blocking, now, wait=False)
+            self._blocked(*first_blocked, now, wait=False)
         return None
 
     def _planned_pick(self, cands: list[FruitRecord], now: int) -> tuple[FruitRecord, str] | None:
@@ -365,8 +362,7 @@ class Machine:
 
         A fruit blocked by one that is still to do but not a candidate now (waiting after a
         stuck attempt) waits too; one that no order can clear (blocked by a fruit that stays,
-        or in a cycle of blockers) comes after the others: attempted once anyway
-        (``attempt_blocked``, nearest first), then given up."""
+        or in a cycle of blockers) is given up."""
         for r in cands:
             self._check_reach(r, now)
         ok = [r for r in cands if not r.finished]
@@ -383,23 +379,9 @@ class Machine:
         blocked_by = {j: {index.get(b.key, -1) for b in bl} for j, bl in enumerate(blocking)}
         can = clearable(blocked_by)
         if len(can) != len(ok):
-            stuck = sorted(set(blocked_by) - can)
-            if self.s.attempt_blocked and can:
-                # Plan the ones that can be cleared; the others are attempted once they are done
-                # (a clearable fruit's blockers are all clearable: the subset is closed).
-                keep = sorted(can)
-                ok, blocking = [ok[j] for j in keep], [blocking[j] for j in keep]
-                index = {r.key: i for i, r in enumerate(ok)}
-                blocked_by = {
-                    j: {index.get(b.key, -1) for b in bl} for j, bl in enumerate(blocking)
-                }
-            else:
-                nearest = min(stuck, key=lambda j: (ok[j].seen.distance_m, ok[j].key))
-                if self._force(ok[nearest]):
-                    return ok[nearest], self._forced_why(blocking[nearest])
-                for j in stuck:
-                    self._blocked(ok[j], blocking[j], now, wait=False)
-                return None
+            for j in sorted(set(blocked_by) - can):
+                self._blocked(ok[j], blocking[j], now, wait=False)
+            return None
         before = [(i, j) for j, bl in blocked_by.items() for i in sorted(bl)]
         pts = np.array([pre_pose(r.planned, self.pose_settings).tip_world_m for r in ok])
         start = self.last_tip_world_m if self.last_tip_world_m is not None else self._ready_tip()
@@ -438,18 +420,6 @@ class Machine:
             self.s.neighbour_clearance_m,
         )
         return [present[i] for i in hit]
-
-    def _force(self, rec: FruitRecord) -> bool:
-        """Attempt ``rec`` once despite blockers that stay (``attempt_blocked``)? Marks it."""
-        if not self.s.attempt_blocked or rec.forced:
-            return False
-        rec.forced = rec.deferred = True  # a stall now gives it up
-        return True
-
-    @staticmethod
-    def _forced_why(blocking: list[FruitRecord]) -> str:
-        names = ", ".join(f"#{b.fruit_id}" for b in blocking)
-        return f"blocked by {names}, which no order clears: attempted once anyway"
 
     def _blocked(self, rec: FruitRecord, blocking: list[FruitRecord], now: int, wait: bool) -> None:
         """``rec`` cannot be harvested now: wait for the others (once), or give it up."""
@@ -550,10 +520,6 @@ class Machine:
         for r in self.book.detected():
             if not r.finished and r.losses > 0 and not r.in_scene:
                 r.outcome, r.reason = "lost", "left the scene and never came back"
-            elif not r.finished and r.started_ns is None and not r.in_scene:
-                # Fruit hang still in view: a track the scene forgot before it was ever
-                # attempted was a fruit carried in the dish or falling, or a false detection.
-                r.outcome, r.reason = "lost", "left the scene before it was attempted"
             if r.finished_ns is None and r.finished:
                 r.finished_ns = now
         self.target = None

@@ -36,11 +36,9 @@ def fruit(fid: int, p: tuple[float, float, float], distance_m: float) -> Fruit:
     )
 
 
-def core_with(order: str, *fruits: Fruit, attempt_blocked: bool = True) -> PlannerCore:
+def core_with(order: str, *fruits: Fruit) -> PlannerCore:
     """A planner core whose book holds ``fruits``, every pose reachable by the IK."""
-    core = PlannerCore(
-        load_settings(Settings, {"order": order, "attempt_blocked": attempt_blocked})
-    )
+    core = PlannerCore(load_settings(Settings, {"order": order}))
     core.book.update(
         SceneState(
             header=Header(stamp_ns=0, seq=0, source="scene"),
@@ -113,28 +111,9 @@ def test_planned_waits_for_a_blocker_deferred_after_a_stuck_attempt() -> None:
 
 
 @pytest.mark.parametrize("order", ["nearest", "planned"])
-def test_fruit_blocking_each_other_are_attempted_once_each_after_the_free_one(order: str) -> None:
-    free = (0.70, -0.30, 1.30)
-    core = core_with(order, fruit(4, D, 0.5), fruit(5, E, 0.6), fruit(6, free, 0.7))
-    assert select(core) == 6
-    harvest(core, 6)
-    recs = core.book.records
-    assert select(core) == 4 and recs[4].forced  # the nearest of the cycle, anyway
-    assert "attempted once anyway" in core.machine.events[-2].reason
-    core.machine._check_stuck(10**12, 1.0, leave=False)  # its attempt stalls: given up
-    assert recs[4].outcome == "unreachable" and "timed out" in recs[4].reason
-    assert core.machine.target is not None and core.machine.target.fruit_id == 5
-    assert recs[5].forced  # 4 stays: 5 is attempted once too
-    core.machine._check_stuck(2 * 10**12, 1.0, leave=False)
-    assert recs[5].outcome == "unreachable" and select(core) is None
-
-
-@pytest.mark.parametrize("order", ["nearest", "planned"])
 def test_fruit_blocking_each_other_are_given_up_and_the_free_one_taken(order: str) -> None:
     free = (0.70, -0.30, 1.30)
-    core = core_with(
-        order, fruit(4, D, 0.5), fruit(5, E, 0.6), fruit(6, free, 0.7), attempt_blocked=False
-    )
+    core = core_with(order, fruit(4, D, 0.5), fruit(5, E, 0.6), fruit(6, free, 0.7))
     assert select(core) == 6
     harvest(core, 6)
     assert select(core) is None
