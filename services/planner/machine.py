@@ -520,6 +520,10 @@ class Machine:
         for r in self.book.detected():
             if not r.finished and r.losses > 0 and not r.in_scene:
                 r.outcome, r.reason = "lost", "left the scene and never came back"
+            elif not r.finished and r.started_ns is None and not r.in_scene:
+                # Fruit hang still in view: a track the scene forgot before it was ever
+                # attempted was a fruit carried in the dish or falling, or a false detection.
+                r.outcome, r.reason = "lost", "left the scene before it was attempted"
             if r.finished_ns is None and r.finished:
                 r.finished_ns = now
         self.target = None
