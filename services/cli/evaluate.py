@@ -26,15 +26,15 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
 
 def parse_seeds(text: str) -> list[int]:
-    """'0-4' (inclusive) or '0,3,7' → seeds; a clear error otherwise."""
+    """'0-4' (inclusive), '0,3,7', '3' or a mix → seeds (the benchmarks' parser); an argparse
+    error naming the argument otherwise."""
+    from services.planner.bench import BenchError
+    from services.planner.bench import parse_seeds as parse
+
     try:
-        if "-" in text:
-            a, b = text.split("-", 1)
-            seeds = list(range(int(a), int(b) + 1))
-        else:
-            seeds = [int(x) for x in text.split(",") if x.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"seeds {text!r}: expected A-B or A,B,C") from None
+        seeds = parse(text)
+    except BenchError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
     if not seeds or min(seeds) < 0:
         raise argparse.ArgumentTypeError(f"seeds {text!r}: need at least one seed, none < 0")
     return seeds

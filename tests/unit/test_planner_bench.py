@@ -53,6 +53,16 @@ def test_seed_ranges_and_bad_arguments() -> None:
     assert r.returncode == 2 and "--seeds" in r.stderr
 
 
+def test_the_eval_commands_parse_seeds_as_the_benchmarks_do() -> None:
+    import argparse
+
+    from services.cli.evaluate import parse_seeds as eval_seeds
+
+    assert eval_seeds("0-2,7") == parse_seeds("0-2,7") == [0, 1, 2, 7]
+    with pytest.raises(argparse.ArgumentTypeError, match="3 < 5"):
+        eval_seeds("5-3")
+
+
 def test_set_refuses_a_bad_key_naming_it() -> None:
     with pytest.raises(BenchError, match="occupancy_typo"):
         parse_sets(["scene.occupancy_typo=1"])
