@@ -30,40 +30,41 @@ class PhysicalFruit:
     spent_ns: int
     cuts: int
 
+    def absorb(self, earlier: FruitRecord) -> None:
+        """``earlier`` was an attempt at this fruit: its start, time and cuts count here."""
+        self.started_ns = earlier.started_ns
+        self.spent_ns += earlier.spent_ns
+        self.cuts += earlier.cuts
+
 
 def physical_fruit(records: list[FruitRecord]) -> list[PhysicalFruit]:
     """The records folded into physical fruit (module docstring), in the records' order."""
     out = {r.key: PhysicalFruit(r, r.started_ns, r.spent_ns, r.cuts) for r in records}
     for r in records:
-        if (
-            r.outcome is None
-            and r.started_ns is None
-            and any(
-                o.key in out and o is not r and same_fruit(o.planned, r.planned) for o in records
-            )
-        ):
+        if _never_attempted(r) and any(_same(o, r, out) for o in records):
             del out[r.key]  # a second track of a fruit listed on its own
     for d in records:
         if d.outcome != "dropped" or d.finished_ns is None:
             continue
-        later = [
-            o
-            for o in records
-            if o.outcome == "harvested"
-            and o.key in out
-            and o.started_ns is not None
-            and o.started_ns >= d.finished_ns
-            and same_fruit(o.planned, d.planned)
-        ]
+        later = [o for o in records if _harvested_after(o, d.finished_ns) and _same(o, d, out)]
         if later:
-            h = out[later[0].key]
-            h.started_ns, h.spent_ns, h.cuts = (
-                d.started_ns,
-                h.spent_ns + d.spent_ns,
-                h.cuts + d.cuts,
-            )
+            out[later[0].key].absorb(d)
             del out[d.key]
     return [out[r.key] for r in records if r.key in out]
+
+
+def _never_attempted(r: FruitRecord) -> bool:
+    """Never selected and still to do."""
+    return r.started_ns is None and r.outcome is None
+
+
+def _same(o: FruitRecord, r: FruitRecord, listed: dict[int, PhysicalFruit]) -> bool:
+    """``o`` is another record, still listed, overlapping ``r``."""
+    return o is not r and o.key in listed and same_fruit(o.planned, r.planned)
+
+
+def _harvested_after(o: FruitRecord, t_ns: int) -> bool:
+    return o.outcome == "harvested" and o.started_ns is not None and o.started_ns >= t_ns
 
 
 def run_summary(
