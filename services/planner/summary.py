@@ -3,8 +3,9 @@
 The book keeps one record per track identity it could not tie to another; at the end of the
 run, what the run has shown is used to fold records that were one fruit:
 
-* a record never attempted and still to do that overlaps another record (``same_fruit``) is
-  that fruit under a second track (a twin, or an ID the tracker moved after a harvest);
+* a record never attempted (still to do, or forgotten by the scene) that overlaps another
+  record (``same_fruit``) is that fruit under a second track (a twin, or an ID the tracker moved
+  after a harvest);
 * a fruit reported dropped (not in the basket after the cut, not seen on its branch) that is
   harvested later where it hung was not dropped: the cut missed (the tools hid it) and the
   harvest supersedes the verdict; its time and cuts add up.
@@ -54,8 +55,8 @@ def physical_fruit(records: list[FruitRecord]) -> list[PhysicalFruit]:
 
 
 def _never_attempted(r: FruitRecord) -> bool:
-    """Never selected and still to do."""
-    return r.started_ns is None and r.outcome is None
+    """Never selected, and not settled by a check of its own (still to do, or forgotten)."""
+    return r.started_ns is None and r.outcome in (None, "lost")
 
 
 def _same(o: FruitRecord, r: FruitRecord, listed: dict[int, PhysicalFruit]) -> bool:

@@ -71,3 +71,12 @@ def test_a_track_forgotten_before_any_attempt_ends_lost_one_in_view_pending() ->
     core.machine._end_run(5 * S, "run time limit")
     assert recs[1].outcome is None  # still in view, never attempted: pending in the summary
     assert recs[2].outcome == "lost" and "before it was attempted" in recs[2].reason
+
+
+def test_a_forgotten_second_track_of_a_listed_fruit_is_not_another_fruit() -> None:
+    done = record(1, (0.6, 0.0, 1.3), outcome="harvested", started_ns=S, spent_ns=3 * S)
+    gone = record(
+        2, (0.6, 0.03, 1.3), outcome="lost", reason="left the scene before it was attempted"
+    )
+    far_gone = record(3, (0.6, 0.2, 1.3), outcome="lost")
+    assert [f.rec.key for f in physical_fruit([done, gone, far_gone])] == [1, 3]
