@@ -109,7 +109,8 @@ def measure_trunk(
         return TrunkFailure("trunk_no_circle", f"no circle through {len(keys)} keys", n)
     centre, radius, inl = fit
     heights = keys[inl, 2]
-    span = float(heights.max() - heights.min()) + p.key_height_m
+    # No inlier at all happens (the candidates are ranked on a subsample of the cells).
+    span = float(heights.max() - heights.min()) + p.key_height_m if len(heights) else 0.0
     if int(inl.sum()) < p.min_keys or span < p.min_height_m:
         return TrunkFailure(
             "trunk_too_little",

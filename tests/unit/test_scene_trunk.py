@@ -66,6 +66,19 @@ def test_a_flat_bark_coloured_board_is_not_a_trunk() -> None:
     assert isinstance(f, TrunkFailure) and f.reason == "trunk_no_circle", f
 
 
+def test_a_best_circle_through_no_key_is_a_failure_not_a_crash(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    # Seen in a paper-exp1 harvest run: the circle ranked best on a subsample of the cells had
+    # no inlier among the keys, and the height span of no keys raised (the scene service died).
+    import services.scene.trunk as trunk
+
+    def no_inlier(keys_xy, cam, p):  # type: ignore[no-untyped-def]
+        return np.array([1.2, 0.05]), 0.07, np.zeros(len(keys_xy), bool)
+
+    monkeypatch.setattr(trunk, "_ransac_circle", no_inlier)
+    f = measure(trunk_scene(branches=False))
+    assert isinstance(f, TrunkFailure) and f.reason == "trunk_too_little", f
+
+
 def fix_at(x: float, y: float, r: float = 0.07) -> TrunkFix:
     return TrunkFix(np.array([x, y, 1.0]), r, 1000, 500)
 
