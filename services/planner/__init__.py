@@ -142,14 +142,6 @@ class Settings(ServiceSettings):
         description="Cut failed when the fruit is seen, after the cut, within this of where it "
         "was cut, m.",
     )
-    attached_swing_m: float = Field(
-        default=0.10,
-        ge=0,
-        description="Cut failed also when the fruit is seen, after the cut, no lower than where "
-        "it was cut (by attached_tolerance_m) and within this of it sideways: it swings on its "
-        "peduncle (a tool's touch can push a fruit 6 cm aside, and it swings back while the "
-        "tools hide it); a cut fruit has fallen far lower by then, m.",
-    )
     seen_after_cut_s: float = Field(
         default=0.4,
         ge=0,

@@ -73,18 +73,6 @@ class CutState:
     centre_world_m: np.ndarray
 
 
-def hangs_where_cut(
-    p_world_m: np.ndarray, cut_world_m: np.ndarray, tolerance_m: float, swing_m: float
-) -> bool:
-    """A fruit seen (after the cut) at ``p`` still hangs on its branch: where it was cut, or
-    swung on its peduncle (within ``swing_m`` sideways, not lower by more than the tolerance).
-    A cut fruit is in the basket or has fallen far by then."""
-    d = np.asarray(p_world_m, float) - np.asarray(cut_world_m, float)
-    if float(np.linalg.norm(d)) <= tolerance_m:
-        return True
-    return float(d[2]) >= -tolerance_m and float(np.hypot(d[0], d[1])) <= swing_m
-
-
 @dataclass
 class Progress:
     """Best task error of the current phase and when it last improved."""
@@ -599,9 +587,7 @@ class Machine:
         if not rec.in_scene or f.last_seen_stamp_ns < cut.stamp_ns + self.s.seen_after_cut_s * NS:
             return False
         p = np.array(f.position_world_m, float)
-        return hangs_where_cut(
-            p, cut.centre_world_m, self.s.attached_tolerance_m, self.s.attached_swing_m
-        )
+        return bool(np.linalg.norm(p - cut.centre_world_m) <= self.s.attached_tolerance_m)
 
     def _note_switches_and_moves(self) -> None:
         rec = self.target

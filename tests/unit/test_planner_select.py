@@ -3,7 +3,6 @@ that clears the way, and only fruit no order can clear are given up."""
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 from schemas.base import Header
@@ -157,15 +156,3 @@ def test_a_stale_second_track_of_a_harvested_fruit_is_no_neighbour_nor_candidate
     assert select(core) == 1  # not blocked by the stale track 7, which is not selected either
     ps = core.machine.pose_settings
     assert blockers(recs[1].planned, [recs[7].planned], ps, 0.0) == [0]  # where A's dish goes
-
-
-def test_a_fruit_seen_swung_aside_after_the_cut_still_hangs_one_fallen_does_not() -> None:
-    from services.planner.machine import hangs_where_cut
-
-    cut = np.array([0.684, -0.013, 1.233])  # paper-exp1 seed 11: cut where the fruit was pushed
-    rest = np.array([0.695, -0.080, 1.214])  # it swung back: 6.8 cm aside, 1.9 cm lower
-    assert hangs_where_cut(cut + np.array([0.0, 0.0, 0.02]), cut, 0.03, 0.10)
-    assert hangs_where_cut(rest, cut, 0.03, 0.10)
-    assert not hangs_where_cut(rest, cut, 0.03, 0.0)  # the old test: where it was cut only
-    assert not hangs_where_cut(cut - np.array([0.0, 0.0, 0.3]), cut, 0.03, 0.10)  # fell
-    assert not hangs_where_cut(cut + np.array([0.0, 0.2, 0.0]), cut, 0.03, 0.10)  # another fruit
