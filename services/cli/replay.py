@@ -18,7 +18,7 @@ from services.registry import UnknownServiceError
 from services.replay.player import OutputCollector, Player
 from services.replay.resim import ResimError, resim
 from services.runtime.settings import SettingsError, parse_overrides
-from services.runtime.spec import answer_closure
+from services.runtime.spec import answer_closure, answered_alongside
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
@@ -99,14 +99,22 @@ def cmd_replay(args: argparse.Namespace) -> int:
         awaited: set[str] = set()
         collector = None
         caused_by: dict[str, tuple[str, ...]] = {}
+        alongside: dict[str, tuple[str, ...]] = {}
         if args.lockstep:
             specs = [s.spec for s in bus.query_status()]
             live_outputs = {t for s in specs for t in s.outputs}
             awaited = (recorded & live_outputs) - published
             collector = OutputCollector(bus, awaited)
             caused_by = {t: answer_closure(t, specs) for t in published}
+            alongside = {t: answered_alongside(t, specs) for t in published}
         player = Player(
-            bus, lambda t: t in published, awaited, collector, args.timeout, caused_by=caused_by
+            bus,
+            lambda t: t in published,
+            awaited,
+            collector,
+            args.timeout,
+            caused_by=caused_by,
+            alongside=alongside,
         )
         with Progress(transient=True) as bar:
             task = bar.add_task("replay", total=info.message_count)

@@ -19,7 +19,7 @@ import heapq
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from schemas.codec import DecodeError
 from schemas.topics import TOPICS
@@ -117,12 +117,14 @@ class _Awaited:
     topic: str
     stamp_ns: int
     seq: int
+    cause_published: bool = False  # kept back for a run that is published now
 
 
 class Player:
     """Walks recorded messages; publishes the ``publish`` ones, awaits the ``await_`` ones.
 
     ``caused_by``: topic → the topics answering it (answer closure), for lock-step.
+    ``alongside``: topic → the other outputs its answerers may publish with an answer.
     ``alive(topic)``: False once the producer of ``topic`` is gone (nothing more will come).
     """
 
@@ -136,10 +138,12 @@ class Player:
         alive: Callable[[str], bool] = lambda _t: True,
         progress: Callable[[int], None] | None = None,
         caused_by: Mapping[str, Iterable[str]] | None = None,
+        alongside: Mapping[str, Iterable[str]] | None = None,
     ) -> None:
         self.bus, self.publish, self.await_, self.collector = bus, publish, await_, collector
         self.timeout_s, self.alive, self.progress = timeout_s, alive, progress
         self.caused_by = {k: frozenset(v) for k, v in (caused_by or {}).items()}
+        self.alongside = {k: frozenset(v) for k, v in (alongside or {}).items()}
         self.stats = PlayStats()
         self.stop = threading.Event()
         self._pending: list[_Awaited] = []  # recorded outputs not yet awaited
@@ -176,9 +180,13 @@ class Player:
         return self.stats
 
     def _run_lockstep(self, messages: Iterable[RecordedMessage]) -> None:
-        """Stamp order; consecutive inputs of one stamp (no output recorded between them: the
-        master's group) are published together, each naming the others as its ``group``."""
+        """Stamp order; consecutive inputs of one stamp (the master's group) are published
+        together, each naming the others as its ``group``. An output recorded between them
+        ends the group, unless it answers the group and the group's answers are not all in:
+        the master publishes a group at once and the next one only after every answer, so
+        such an output is a fast answer that the recorder took before the group's rest."""
         run: list[RecordedMessage] = []
+        answered: set[str] = set()  # answers to ``run`` recorded amid it
         for i, m in enumerate(by_stamp(messages)):
             if self.stop.is_set():
                 return
@@ -187,22 +195,48 @@ class Player:
             if m.derived or m.topic.startswith(REJECTED_PREFIX):
                 self.stats.skipped += 1
             elif m.topic in self.await_:
-                self._flush(run)
+                if self._answers(m, run):
+                    answered.add(m.topic)
+                else:
+                    self._flush(run)
+                    answered.clear()
                 self._defer(m)
             elif not self.publish(m.topic):
                 self.stats.skipped += 1
             else:
-                if run and run[0].publish_time_ns != m.publish_time_ns:
+                if run and (
+                    run[0].publish_time_ns != m.publish_time_ns
+                    or (answered and answered >= self._caused_by_run(run))
+                ):
                     self._flush(run)
+                    answered.clear()
                 run.append(m)
         if not self.stop.is_set():
             self._flush(run)
             self._settle(None)
 
+    def _caused_by_run(self, run: list[RecordedMessage]) -> frozenset[str]:
+        """The answers that ``run`` must get (the master awaits them all)."""
+        return frozenset(t for m in run for t in self.caused_by.get(m.topic, ()))
+
+    def _caused_or_alongside(self, run: list[RecordedMessage]) -> frozenset[str]:
+        """Every output that ``run`` can cause: its answers and what comes beside them."""
+        beside = (t for m in run for t in self.alongside.get(m.topic, ()))
+        return self._caused_by_run(run) | frozenset(beside)
+
+    def _answers(self, m: RecordedMessage, run: list[RecordedMessage]) -> bool:
+        """True when the output ``m`` answers a message of ``run`` (or comes beside an answer)
+        at its stamp."""
+        return bool(run) and (
+            m.publish_time_ns == run[0].publish_time_ns
+            and m.topic in self._caused_or_alongside(run)
+        )
+
     def _flush(self, run: list[RecordedMessage]) -> None:
-        group = [_dep_of(m) for m in run]
+        if not run:
+            return
+        attachment = encode_after(self._settle(run), [_dep_of(m) for m in run])
         for m in run:
-            attachment = encode_after(self._settle(m), group)
             self.bus.put_raw(m.topic, m.payload, m.encoding or _encoding(m.topic), attachment)
             self.stats.published += 1
         run.clear()
@@ -222,15 +256,18 @@ class Player:
         self.stats.awaited += 1
         self._pending.append(_Awaited(m.topic, stamp_ns, seq))
 
-    def _settle(self, m: RecordedMessage | None) -> list[Dep]:
-        """Before publishing ``m`` (None: the end): await the pending outputs, except those
-        that ``m`` causes; return the predecessors of ``m``: the ones that came in."""
+    def _settle(self, run: list[RecordedMessage] | None) -> list[Dep]:
+        """Before publishing ``run`` (None: the end): await the pending outputs, except those
+        that ``run`` causes; return the predecessors of ``run``: the ones that came in."""
         assert self.collector is not None
-        caused = self.caused_by.get(m.topic, frozenset()) if m is not None else frozenset()
+        caused = self._caused_or_alongside(run) if run else frozenset()
+        stamp_ns = run[0].publish_time_ns if run else None
         keep = []
         for o in self._pending:
-            if m is not None and o.stamp_ns == m.publish_time_ns and o.topic in caused:
-                keep.append(o)  # recorded before its cause: awaited after it is published
+            if not o.cause_published and o.stamp_ns == stamp_ns and o.topic in caused:
+                # Recorded before its cause: awaited after it is published (and then always:
+                # a next run at this stamp may cause its topic too, but did not cause it).
+                keep.append(replace(o, cause_published=True))
                 continue
             alive = self._alive_of(o.topic)
             if self.collector.wait_for(o.topic, o.seq, self.timeout_s, alive):
@@ -238,8 +275,8 @@ class Player:
             else:
                 self.stats.timed_out += 1
         self._pending = keep
-        # With those of the previous publish: a message published right after another (the
-        # basket after the joint state) follows the same outputs.
+        # With those of the previous publish: a group published right after another (no output
+        # awaited between them) follows the same outputs.
         done, self._done = self._done, []
         after = [*self._done_before, *done]
         self._done_before = done or self._done_before

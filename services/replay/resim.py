@@ -18,7 +18,7 @@ from services.recorder.inspect import RecordingInfo, iter_messages, read_info
 from services.registry import SERVICE_MODULES, service_def
 from services.replay.player import OutputCollector, Player, PlayStats
 from services.runtime.lockstep import LockstepPlan
-from services.runtime.spec import NodeSpec, answer_closure
+from services.runtime.spec import NodeSpec, answer_closure, answered_alongside
 from services.supervisor.process import LogSink, ManagedProcess
 from services.supervisor.stack import deep_merge
 
@@ -33,6 +33,7 @@ class TopicDiff:
     extra: int = 0
     after_end: int = 0  # produced past the last recorded seq (a truncated recording)
     first_difference_seq: int | None = None
+    first_missing_seq: int | None = None  # the first recorded seq not produced again
     compared: bool = True  # False for wall-clock diagnostics (Topic.deterministic is False)
     not_compared: int = 0  # produced again but not compared (wall-clock diagnostics)
 
@@ -202,6 +203,7 @@ def resim(
             producing,
             progress=(lambda i: progress(i, info.message_count)) if progress else None,
             caused_by={t: answer_closure(t, specs) for t in listened},
+            alongside={t: answered_alongside(t, specs) for t in listened},
         )
         stats = player.run(iter_messages(path), speed=None)
         if not alive():
@@ -268,6 +270,7 @@ def _diff(path: Path, outputs: list[str], collector: OutputCollector) -> list[To
         for seq, payload in sorted(rec.items()):
             if seq not in got:
                 d.missing += 1
+                d.first_missing_seq = seq if d.first_missing_seq is None else d.first_missing_seq
             elif not d.compared:
                 d.not_compared += 1
             elif got[seq] == payload:

@@ -57,3 +57,16 @@ def answer_closure(topic: str, specs: Iterable[NodeSpecModel | NodeSpec]) -> tup
                     done.append(out)
                     frontier.append(out)
     return tuple(done)
+
+
+def answered_alongside(topic: str, specs: Iterable[NodeSpecModel | NodeSpec]) -> tuple[str, ...]:
+    """The other outputs of the services that answer ``topic`` (transitively), which they may
+    publish beside an answer (the planner's events beside its target). No one awaits them:
+    a service publishes them only when it has something to say."""
+    specs = list(specs)
+    closure = answer_closure(topic, specs)
+    out: list[str] = []
+    for s in specs:
+        if any(t in s.outputs for t in closure):
+            out += [t for t in s.outputs if t not in closure and t not in out and t != topic]
+    return tuple(out)

@@ -12,7 +12,7 @@ import pytest
 
 from schemas.topics import TOPICS
 from services.registry import service_def
-from services.replay.resim import resim
+from services.replay.resim import ResimReport, resim
 from tests.harvest_helpers import lab_scenario
 from tests.helpers import harvest, payloads_by_topic, short_dir
 
@@ -81,6 +81,12 @@ def test_two_runs_are_byte_identical_on_every_topic(runs: tuple[Path, Path]) -> 
         assert diff is None, f"{topic}: message {diff} differs"
 
 
+def _failure(report: ResimReport) -> str:
+    """The topics that failed and the player's counts, in full (pytest shortens a dict)."""
+    bad = [t for t in report.topics if t.compared and (t.different or t.missing or t.extra)]
+    return f"{report.recording}: {bad}; {report.play}; {report.warnings}"
+
+
 @pytest.mark.parametrize(
     "group",
     [
@@ -96,7 +102,7 @@ def test_resim_of_every_service_is_identical(
     # on the recorded frames (its own group before, now a part of this one), the controller and
     # planner on the resimmed scene's states (each input waits for its causal predecessors).
     report = resim(runs[0], list(group), timeout_s=60.0)
-    assert report.ok and report.identical_ratio == 1.0, report.to_json()
+    assert report.ok and report.identical_ratio == 1.0, _failure(report)
     by = {t.topic: t for t in report.topics}
     for d in group:
         for topic in service_def(d).spec.outputs:

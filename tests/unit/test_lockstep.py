@@ -9,7 +9,7 @@ import pytest
 
 from services.runtime.lockstep import AnswerBarrier, LockstepStall, LockstepStopped
 from services.runtime.node import InputOrder
-from services.runtime.spec import NodeSpec, answer_closure
+from services.runtime.spec import NodeSpec, answer_closure, answered_alongside
 
 CHAIN = [
     NodeSpec(
@@ -37,6 +37,20 @@ def test_closure_follows_answers_transitively() -> None:
         "scene/state",
     )
     assert answer_closure("robot/joint_state", CHAIN) == ()
+
+
+def test_the_outputs_beside_the_answers_are_the_answerers_other_outputs() -> None:
+    from services.registry import service_def
+
+    specs = [service_def(n).spec for n in ("sim", "controller", "planner")]
+    assert answer_closure("robot/joint_state", specs) == (
+        "robot/command",
+        "control/status",
+        "plan/target",
+    )
+    beside = answered_alongside("robot/joint_state", specs)
+    assert set(beside) == {"diag/controller", "robot/tool", "harvest/events", "harvest/summary"}
+    assert answered_alongside("camera/rgbd", CHAIN) == ()
 
 
 def test_spec_refuses_inconsistent_answers() -> None:

@@ -56,7 +56,13 @@ class FakeBus:
                 cb(RawSample(out.topic, out.payload, "", None, 0))
 
 
-def _play(bus: FakeBus, messages: list[RecordedMessage], timeout_s: float = 5.0) -> Player:
+def _play(
+    bus: FakeBus,
+    messages: list[RecordedMessage],
+    timeout_s: float = 5.0,
+    caused_by: dict[str, tuple[str, ...]] = CAUSED_BY,
+    alongside: dict[str, tuple[str, ...]] | None = None,
+) -> Player:
     collector = OutputCollector(bus, ["demo/answer"])  # type: ignore[arg-type]
     player = Player(
         bus,  # type: ignore[arg-type]
@@ -64,7 +70,8 @@ def _play(bus: FakeBus, messages: list[RecordedMessage], timeout_s: float = 5.0)
         {"demo/answer"},
         collector,
         timeout_s,
-        caused_by=CAUSED_BY,
+        caused_by=caused_by,
+        alongside=alongside,
     )
     player.run(messages)
     return player
@@ -96,6 +103,41 @@ def test_inputs_published_together_name_each_other_as_their_group() -> None:
     _play(bus, [_tick(0), _rec("demo/tick", _tick_at(1, 0))], 0.1)
     groups = [decode_after(a).group for _, _, a in bus.published]
     assert groups == [(("demo/tick", 0, 0), ("demo/tick", 0, 1))] * 2
+
+
+def _groups(bus: FakeBus) -> list[tuple[int, ...]]:
+    return [tuple(q for _, _, q in decode_after(a).group) for _, _, a in bus.published]
+
+
+def test_a_fast_answer_recorded_amid_the_masters_group_does_not_split_it() -> None:
+    # The master published ticks 0 and 1 at once; the worker answered tick 0 before the recorder
+    # took tick 1. The group's other answer is not in yet, so tick 1 is still of that group: a
+    # consumer must wait for both (the CI failure: the planner stepped without the basket).
+    bus = FakeBus()
+    late = {"demo/tick": ("demo/answer", "demo/late")}
+    p = _play(bus, [_tick(0), _answer(0), _rec("demo/tick", _tick_at(1, 0))], 1.0, late)
+    assert _groups(bus) == [(0, 1), (0, 1)] and p.stats.timed_out == 0
+
+
+def test_an_output_beside_an_answer_does_not_split_the_group_either() -> None:
+    # The controller's diagnostics come beside its command; no one awaits them.
+    bus = FakeBus()
+    p = _play(
+        bus,
+        [_tick(0), _answer(0), _rec("demo/tick", _tick_at(1, 0))],
+        1.0,
+        caused_by={"demo/tick": ("demo/late",)},
+        alongside={"demo/tick": ("demo/answer",)},
+    )
+    assert _groups(bus) == [(0, 1), (0, 1)] and p.stats.timed_out == 0
+
+
+def test_once_every_answer_is_in_the_next_message_of_the_stamp_is_a_new_group() -> None:
+    # The master publishes its next group (same stamp) only after the answers to the first.
+    bus = FakeBus()
+    _play(bus, [_tick(0), _answer(0), _rec("demo/tick", _tick_at(1, 0))], 1.0)
+    assert _groups(bus) == [(0,), (1,)]
+    assert decode_after(bus.published[1][2]).after == (("demo/answer", 0, 0),)
 
 
 def test_an_answer_that_never_comes_is_counted_and_the_walk_goes_on() -> None:
