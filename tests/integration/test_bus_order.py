@@ -50,7 +50,10 @@ def test_two_keys_keep_their_interleaving_under_gil_contention(bus_env: BusEnv) 
             h = Header(stamp_ns=i, seq=i, source="pub")
             tick.put(DemoTick(header=h, tick=i, value=float(i)))
             answer.put(DemoAnswer(header=h, tick=i, result=float(i), worker_state=0))
-        wait_until(lambda: sum(v >= 0 for _, v in got) == 2 * N, 20, f"{2 * N} samples")
+        # Not a speed check: with the burner holding the GIL, each put and each callback can
+        # wait a whole switch interval (5 ms) for it, ~4,800 waits = 24 s at worst (CI once
+        # took more than 20 s). The order below is the test.
+        wait_until(lambda: sum(v >= 0 for _, v in got) == 2 * N, 120, f"{2 * N} samples")
     finally:
         stop.set()
         burner.join()
