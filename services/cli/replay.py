@@ -18,7 +18,7 @@ from services.registry import UnknownServiceError
 from services.replay.player import OutputCollector, Player
 from services.replay.resim import ResimError, resim
 from services.runtime.settings import SettingsError, parse_overrides
-from services.runtime.spec import answer_closure, answered_alongside
+from services.runtime.spec import answer_maps
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
@@ -105,8 +105,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
             live_outputs = {t for s in specs for t in s.outputs}
             awaited = (recorded & live_outputs) - published
             collector = OutputCollector(bus, awaited)
-            caused_by = {t: answer_closure(t, specs) for t in published}
-            alongside = {t: answered_alongside(t, specs) for t in published}
+            caused_by, alongside = answer_maps(published, specs)
         player = Player(
             bus,
             lambda t: t in published,

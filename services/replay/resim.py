@@ -18,7 +18,7 @@ from services.recorder.inspect import RecordingInfo, iter_messages, read_info
 from services.registry import SERVICE_MODULES, service_def
 from services.replay.player import OutputCollector, Player, PlayStats
 from services.runtime.lockstep import LockstepPlan
-from services.runtime.spec import NodeSpec, answer_closure, answered_alongside
+from services.runtime.spec import NodeSpec, answer_closure, answer_maps
 from services.supervisor.process import LogSink, ManagedProcess
 from services.supervisor.stack import deep_merge
 
@@ -192,8 +192,7 @@ def resim(
             p = producer.get(topic)
             return alive() and (p is None or p.running())
 
-        specs = _run_specs(info, names)
-
+        caused_by, alongside = answer_maps(listened, _run_specs(info, names))
         player = Player(
             bus,
             lambda t: t in listened,
@@ -202,8 +201,8 @@ def resim(
             timeout_s,
             producing,
             progress=(lambda i: progress(i, info.message_count)) if progress else None,
-            caused_by={t: answer_closure(t, specs) for t in listened},
-            alongside={t: answered_alongside(t, specs) for t in listened},
+            caused_by=caused_by,
+            alongside=alongside,
         )
         stats = player.run(iter_messages(path), speed=None)
         if not alive():

@@ -59,6 +59,16 @@ def answer_closure(topic: str, specs: Iterable[NodeSpecModel | NodeSpec]) -> tup
     return tuple(done)
 
 
+def answer_maps(
+    topics: Iterable[str], specs: Iterable[NodeSpecModel | NodeSpec]
+) -> tuple[dict[str, tuple[str, ...]], dict[str, tuple[str, ...]]]:
+    """Per topic, its answer closure and the outputs beside its answers (the lock-step player's
+    ``caused_by`` and ``alongside``)."""
+    specs, topics = list(specs), list(topics)
+    closure = {t: answer_closure(t, specs) for t in topics}
+    return closure, {t: answered_alongside(t, specs) for t in topics}
+
+
 def answered_alongside(topic: str, specs: Iterable[NodeSpecModel | NodeSpec]) -> tuple[str, ...]:
     """The other outputs of the services that answer ``topic`` (transitively), which they may
     publish beside an answer (the planner's events beside its target). No one awaits them:
