@@ -11,7 +11,8 @@ Two ways to run a seed:
 Evaluation uses the sim's ground truth (allowed here: it is the judge, never an input of the
 planner): a fruit is *reachable* when the IK reaches its harvest pose and pre-pose computed from
 its true centre and semi-axes (the planner's own reachability test on perfect data); the
-planner's fruit (track IDs) are matched to sim fruit by their last scene position. In clutter a
+planner's fruit (track IDs) are matched to sim fruit by where the track was at the time (a
+tracker re-uses a harvested fruit's ID for another fruit: the ID alone is ambiguous). In clutter a
 fruit also needs an order in which every neighbour in its tools' way goes first (the planner's
 own clearance check, on the true fruit).
 """
@@ -47,8 +48,8 @@ class Collected:
 
     summary: RunSummary | None = None
     truth: GroundTruth | None = None  # the last one
-    last_position: dict[int, tuple[float, float, float]] = field(default_factory=dict)
-    first_position: dict[int, tuple[float, float, float]] = field(default_factory=dict)
+    # every fresh scene position of each track: (stamp ns, world m), in time order
+    sightings: dict[int, list[tuple[int, tuple[float, float, float]]]] = field(default_factory=dict)
     sim_events: list[Any] = field(default_factory=list)
     harvest_events: list[Any] = field(default_factory=list)
     max_velocity_ratio: float = 0.0  # |q̇| / limit over every command
@@ -62,8 +63,8 @@ class Collected:
             s: SceneState = msg
             for f in s.fruits:
                 if f.frames_unseen == 0:
-                    self.last_position[f.fruit_id] = f.position_world_m
-                    self.first_position.setdefault(f.fruit_id, f.position_world_m)
+                    seen = self.sightings.setdefault(f.fruit_id, [])
+                    seen.append((s.header.stamp_ns, f.position_world_m))
         elif topic == "sim/events":
             self.sim_events.append(msg)
         elif topic == "harvest/events":
@@ -310,12 +311,16 @@ def _sim_fruit(p: Any, centres: dict[int, np.ndarray]) -> int | None:
     return i if d[i] <= MATCH_M else None
 
 
-def _track_fruit(got: Collected, track_id: int, centres: dict[int, np.ndarray]) -> int | None:
-    """The sim fruit a track was on: by its last fresh position, else by its first (a harvested
-    fruit's track last seen in the dish or falling is the fruit it was on where it hung)."""
-    for seen in (got.last_position, got.first_position):
-        p = seen.get(track_id)
-        i = None if p is None else _sim_fruit(p, centres)
+def _track_fruit(
+    got: Collected, track_id: int, centres: dict[int, np.ndarray], at_ns: int | None = None
+) -> int | None:
+    """The sim fruit a track was on at ``at_ns``: its sighting nearest that time that lies on a
+    fruit (a harvested fruit's track is later seen in the dish or falling, and a tracker may
+    re-use the ID for another fruit later). Without a time: its last sighting on a fruit."""
+    seen = got.sightings.get(track_id, [])
+    t = seen[-1][0] if at_ns is None and seen else at_ns
+    for _stamp, p in sorted(seen, key=lambda s: (abs(s[0] - (t or 0)), -s[0])):
+        i = _sim_fruit(p, centres)
         if i is not None:
             return i
     return None
@@ -329,18 +334,17 @@ def _contacts(got: Collected, centres: dict[int, np.ndarray]) -> dict[str, int]:
     being harvested at the time (the tools are meant to touch it: cutting at its peduncle, the
     dish under it) and with anything else (trunk, branches, leaves' twigs, other fruit, the
     robot itself): the latter are the collisions."""
-    to_sim = {
-        tid: i for tid in got.last_position if (i := _track_fruit(got, tid, centres)) is not None
-    }
     windows: list[tuple[int, int, int]] = []  # (start ns, end ns, sim fruit)
     current: tuple[int, int] | None = None  # (start ns, sim fruit)
     for ev in got.harvest_events:
         t = ev.header.stamp_ns
-        if ev.event in ("fruit_selected", "replanned") and ev.fruit_id in to_sim:
+        starts = ev.event in ("fruit_selected", "replanned") and ev.fruit_id is not None
+        on = _track_fruit(got, ev.fruit_id, centres, t) if starts else None
+        if on is not None:
             if current is None or ev.event == "fruit_selected":
                 if current is not None:
                     windows.append((current[0], t, current[1]))
-                current = (t, to_sim[ev.fruit_id])
+                current = (t, on)
         elif ev.event in TARGET_ENDS and current is not None:
             windows.append((current[0], t, current[1]))
             current = None
@@ -366,7 +370,8 @@ def evaluate(
     centres = {f.fruit_id: np.array(f.position_world_m) for f in first_truth.fruits}
     outcome: dict[int, str] = {}  # sim fruit → the planner's outcome
     for r in s.fruits if s is not None else ():
-        i = _track_fruit(got, r.fruit_id, centres)
+        when = r.started_ns if r.started_ns is not None else r.finished_ns  # where it hung
+        i = _track_fruit(got, r.fruit_id, centres, when)
         if i is not None:
             outcome.setdefault(i, r.outcome)
     collected = {e.fruit_id for e in got.sim_events if e.kind == "collected"}

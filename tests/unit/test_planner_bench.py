@@ -101,14 +101,20 @@ def test_set_reaches_the_cores(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def test_a_track_is_matched_to_the_fruit_where_it_hung() -> None:
     """A harvested fruit's track is last seen in the dish (no fruit there): it is still the
-    fruit it was first seen on; a track last seen on a fruit is that fruit."""
+    fruit it was on; a tracker that re-uses the ID for another fruit later makes the ID mean
+    that fruit from then on, and the fruit it was on before."""
     import numpy as np
 
     centres = {0: np.array([0.6, 0.0, 1.3]), 1: np.array([0.6, 0.2, 1.3])}
     got = bench.Collected()
-    got.first_position = {7: (0.6, 0.01, 1.3), 8: (0.6, 0.0, 1.3), 9: (0.3, 0.0, 0.9)}
-    got.last_position = {7: (0.45, 0.1, 1.0), 8: (0.6, 0.19, 1.3), 9: (0.3, 0.0, 0.9)}
+    got.sightings = {
+        7: [(10, (0.6, 0.01, 1.3)), (20, (0.45, 0.1, 1.0))],  # on fruit 0, then in the dish
+        8: [(10, (0.6, 0.0, 1.3)), (30, (0.6, 0.19, 1.3))],  # fruit 0, the ID re-used on 1
+        9: [(10, (0.3, 0.0, 0.9))],  # never near a fruit
+    }
     assert bench._track_fruit(got, 7, centres) == 0  # last seen in the dish
     assert bench._track_fruit(got, 8, centres) == 1  # the last sighting wins when it matches
+    assert bench._track_fruit(got, 8, centres, at_ns=12) == 0  # where it was at the time
+    assert bench._track_fruit(got, 8, centres, at_ns=25) == 1
     assert bench._track_fruit(got, 9, centres) is None  # never near a fruit
     assert bench._track_fruit(got, 10, centres) is None  # never seen
