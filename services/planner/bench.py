@@ -360,6 +360,58 @@ def _contacts(got: Collected, centres: dict[int, np.ndarray]) -> dict[str, int]:
     return {"collisions": len(began) - target, "target_contacts": target}
 
 
+HIDDEN_SHARE = 0.05  # a fruit this little visible at the start is "hidden" when never detected
+# Why a reachable fruit was not harvested, from its record: (outcome, phrase in the planner's
+# reason) → fate; the first that matches wins. The phrases are the planner's own (machine.py).
+FATE_RULES: tuple[tuple[str, str, str], ...] = (
+    ("unreachable", "approach no progress", "stalled_approach"),
+    ("unreachable", "approach timed out", "stalled_approach"),
+    ("unreachable", "harvest no progress", "stalled_harvest"),
+    ("unreachable", "harvest timed out", "stalled_harvest"),
+    ("unreachable", "blocked by", "blocked"),
+    ("unreachable", "out of reach", "out_of_reach"),
+    ("cut_failed", "", "cut_failed"),
+    ("dropped", "", "dropped"),
+    ("lost", "", "lost"),
+    ("pending", "", "pending"),
+)
+FATES = (
+    "harvested",
+    *dict.fromkeys(f for _o, _p, f in FATE_RULES),
+    "not_detected",
+    "not_detected_hidden",
+    "other",
+)
+
+
+def fate_of(outcome: str | None, reason: str, visible_share: float) -> str:
+    """One of FATES for a reachable fruit that was not harvested: its record's outcome and
+    reason, or (no record) never detected, hidden or not at the start."""
+    if outcome is None:
+        return "not_detected_hidden" if visible_share < HIDDEN_SHARE else "not_detected"
+    for o, phrase, fate in FATE_RULES:
+        if outcome == o and phrase in reason:
+            return fate
+    return "other"
+
+
+def _fates(
+    records: dict[int, Any], reachable: list[int], collected: set[int], truth: GroundTruth
+) -> dict[str, int]:
+    """How many reachable fruit ended in each fate (every key of FATES, zeros included)."""
+    visible = {f.fruit_id: f.visible_fraction for f in truth.fruits}
+    out = dict.fromkeys(FATES, 0)
+    for i in reachable:
+        r = records.get(i)
+        if i in collected:
+            out["harvested"] += 1
+        else:
+            out[
+                fate_of(None if r is None else r.outcome, "" if r is None else r.reason, visible[i])
+            ] += 1
+    return out
+
+
 def evaluate(
     got: Collected, first_truth: GroundTruth, planner_settings: dict[str, Any]
 ) -> dict[str, Any]:
@@ -369,11 +421,14 @@ def evaluate(
     reach = judged.reachable
     centres = {f.fruit_id: np.array(f.position_world_m) for f in first_truth.fruits}
     outcome: dict[int, str] = {}  # sim fruit → the planner's outcome
+    record: dict[int, Any] = {}  # sim fruit → its record (an attempted one before the others)
     for r in s.fruits if s is not None else ():
         when = r.started_ns if r.started_ns is not None else r.finished_ns  # where it hung
         i = _track_fruit(got, r.fruit_id, centres, when)
         if i is not None:
             outcome.setdefault(i, r.outcome)
+            if i not in record or (record[i].started_ns is None and r.started_ns is not None):
+                record[i] = r
     collected = {e.fruit_id for e in got.sim_events if e.kind == "collected"}
     reachable = sorted(i for i, ok in reach.items() if ok)
     unreachable = sorted(i for i, ok in reach.items() if not ok)
@@ -405,6 +460,7 @@ def evaluate(
         "commands_clamped": counters.commands_clamped if counters is not None else None,
         "max_velocity_ratio": round(got.max_velocity_ratio, 4),
         "cycles_s": [round(c, 3) for c in cycles],
+        "reachable_fates": _fates(record, reachable, collected, first_truth),
         "summary": s.model_dump(mode="json", exclude={"header"}) if s is not None else None,
     }
 
@@ -507,6 +563,9 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
     return {
         **tot,
         "runs": len(rows),
+        "reachable_fates": {
+            k: sum(r.get("reachable_fates", {}).get(k, 0) for r in rows) for k in FATES
+        },
         "success_rate": tot["harvested_reachable"] / tot["reachable"] if tot["reachable"] else 1.0,
         "unreachable_identified": (
             tot["unreachable_correct"] / tot["unreachable_true"] if tot["unreachable_true"] else 1.0
@@ -551,4 +610,8 @@ def table(result: dict[str, Any]) -> str:
             v = pols[o].get(k)
             cells.append(f"{v:14.3f}" if isinstance(v, float) else f"{v!s:>14}")
         lines.append(f"{label:34}" + "".join(cells))
+    lines.append("where the reachable fruit went:")
+    for fate in FATES:
+        cells = [f"{pols[o].get('reachable_fates', {}).get(fate, 0):>14}" for o in pols]
+        lines.append(f"  {fate:32}" + "".join(cells))
     return "\n".join(lines)

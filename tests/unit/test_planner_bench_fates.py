@@ -1,0 +1,93 @@
+"""The harvest bench says where each reachable fruit went; the fates are read from the reasons
+the planner itself writes, so these tests take the reasons from a real planner core."""
+
+from __future__ import annotations
+
+import pytest
+
+from schemas.base import Header
+from schemas.control import ControlStatus
+from services.planner import bench
+from services.planner.kinematics import ReachVerdict
+from tests.unit.test_planner_select import A, B, C, core_with, fruit
+
+NS = 1_000_000_000
+TICK_NS = 20_000_000
+
+
+def status(seq: int, err_m: float, t_ns: int) -> ControlStatus:
+    return ControlStatus(
+        header=Header(stamp_ns=t_ns, seq=t_ns // TICK_NS, source="controller"),
+        target_seq=seq,
+        abs_position_error_m=err_m,
+        abs_orientation_error_rad=0.0,
+        rel_position_error_m=0.0,
+        rel_orientation_error_rad=0.0,
+        converged=False,
+    )
+
+
+def test_a_stalled_approach_is_told_apart() -> None:
+    # The cutter stays 5 cm off the pre-pose: stuck, deferred, tried again, unreachable.
+    core = core_with("nearest", fruit(1, A, 0.5))
+    m, t = core.machine, 0
+    rec = core.book.records[1]
+    while not rec.finished and t < 30 * NS:
+        t += TICK_NS
+        m.step(t, status(m.next_seq, 0.05, t), m.next_seq + 1, 0)
+    assert rec.outcome == "unreachable"
+    assert bench.fate_of(rec.outcome, rec.reason, 1.0) == "stalled_approach"
+
+
+def test_blocked_and_out_of_reach_are_told_apart() -> None:
+    # C is free, B blocks A; B given up → A is unreachable, blocked by B.
+    core = core_with("nearest", fruit(1, A, 0.5), fruit(2, B, 0.6), fruit(3, C, 0.7))
+    core.book.records[2].outcome = "unreachable"
+    core.book.records[3].outcome = "harvested"
+    core.machine._select(0)
+    a = core.book.records[1]
+    assert bench.fate_of(a.outcome, a.reason, 1.0) == "blocked"
+    core = core_with("nearest", fruit(1, A, 0.5))
+    far = ReachVerdict(False, None, 0.08, 0.0)
+    core.book.records[1].reach = (far, far)
+    core.machine._select(0)
+    a = core.book.records[1]
+    assert bench.fate_of(a.outcome, a.reason, 1.0) == "out_of_reach"
+
+
+@pytest.mark.parametrize(
+    ("outcome", "visible", "fate"),
+    [
+        (None, 0.0, "not_detected_hidden"),
+        (None, 0.3, "not_detected"),
+        ("cut_failed", 1.0, "cut_failed"),
+        ("dropped", 1.0, "dropped"),
+        ("lost", 1.0, "lost"),
+        ("pending", 1.0, "pending"),
+        ("unreachable", 1.0, "other"),  # a reason the rules do not know
+    ],
+)
+def test_the_other_fates(outcome: str | None, visible: float, fate: str) -> None:
+    assert bench.fate_of(outcome, "", visible) == fate
+
+
+def test_fates_add_up_over_runs() -> None:
+    counts = [
+        *("fruit", "reachable", "detected", "reachable_detected", "harvested"),
+        *("harvested_reachable", "unreachable_true", "unreachable_blocked"),
+        *("unreachable_reported", "unreachable_correct", "reachable_called_unreachable"),
+        *("dropped", "collisions", "target_contacts", "commands_clamped"),
+    ]
+    base = {**dict.fromkeys(counts, 0), "cycles_s": [], "sim_s": 1.0, "wall_s": 1.0}
+    base["max_velocity_ratio"] = 0.5
+    rows = [
+        {**base, "reachable_fates": {"harvested": 2, "blocked": 1}},
+        {**base, "reachable_fates": {"harvested": 1, "not_detected": 3}},
+    ]
+    tot = bench.aggregate(rows)["reachable_fates"]
+    assert tot["harvested"] == 3 and tot["blocked"] == 1 and tot["not_detected"] == 3
+    assert set(tot) == set(bench.FATES) and sum(tot.values()) == 7
+    agg = bench.aggregate(rows)
+    text = bench.table({"scenario": "x", "seeds": [0], "mode": "inproc", "policies": {"n": agg}})
+    assert "where the reachable fruit went" in text
+    assert any(line.split() == ["not_detected", "3"] for line in text.splitlines())
