@@ -90,8 +90,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "harvested and reachable (IK on the true fruit, with the fruit in its way first), "
         "success rate, unreachable fruit "
         "identified, collisions (sim contacts), median sim seconds per harvested fruit, wall "
-        "time, real-time factor. --mode inproc runs every core in one process in lock-step "
-        "order; --mode stack runs the real stack under the supervisor (slower).",
+        "time, real-time factor, and where each reachable fruit went (harvested, stalled, "
+        "blocked, cut failed, never detected, ...). --mode inproc runs every core in one "
+        "process in lock-step order; --mode stack runs the real stack under the supervisor "
+        "(slower).",
     )
     h.add_argument("--scenario", default="orchard", help="scenario (default orchard)")
     h.add_argument("--seeds", default="0-19", help="seeds: A-B, A,B,C or A (default 0-19)")
