@@ -317,9 +317,11 @@ def _track_fruit(
     """The sim fruit a track was on at ``at_ns``: its sighting nearest that time that lies on a
     fruit (a harvested fruit's track is later seen in the dish or falling, and a tracker may
     re-use the ID for another fruit later). Without a time: its last sighting on a fruit."""
-    seen = got.sightings.get(track_id, [])
-    t = seen[-1][0] if at_ns is None and seen else at_ns
-    for _stamp, p in sorted(seen, key=lambda s: (abs(s[0] - (t or 0)), -s[0])):
+    seen = got.sightings.get(track_id)
+    if not seen:
+        return None
+    t = seen[-1][0] if at_ns is None else at_ns
+    for _stamp, p in sorted(seen, key=lambda s: (abs(s[0] - t), -s[0])):
         i = _sim_fruit(p, centres)
         if i is not None:
             return i
@@ -404,11 +406,12 @@ def _fates(
     for i in reachable:
         r = records.get(i)
         if i in collected:
-            out["harvested"] += 1
+            fate = "harvested"
+        elif r is None:
+            fate = fate_of(None, "", visible[i])
         else:
-            out[
-                fate_of(None if r is None else r.outcome, "" if r is None else r.reason, visible[i])
-            ] += 1
+            fate = fate_of(r.outcome, r.reason, visible[i])
+        out[fate] += 1
     return out
 
 
@@ -563,9 +566,7 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
     return {
         **tot,
         "runs": len(rows),
-        "reachable_fates": {
-            k: sum(r.get("reachable_fates", {}).get(k, 0) for r in rows) for k in FATES
-        },
+        "reachable_fates": {k: sum(r["reachable_fates"].get(k, 0) for r in rows) for k in FATES},
         "success_rate": tot["harvested_reachable"] / tot["reachable"] if tot["reachable"] else 1.0,
         "unreachable_identified": (
             tot["unreachable_correct"] / tot["unreachable_true"] if tot["unreachable_true"] else 1.0
