@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
-from schemas.base import Frozen, Message, NonNegFloat, QuatXYZW, Vec3
+from schemas.base import ArmRole, FiniteFloat, Frozen, Message, NonNegFloat, QuatXYZW, Vec3
 
 HarvestPhase = Literal["idle", "approach", "harvest", "cut", "leave", "home", "done"]
 Fallback = Literal["none", "softened", "absolute_only", "stopped"]
@@ -42,6 +42,19 @@ class RelativeTarget(Frozen):
     )
 
 
+class ArmJointTarget(Frozen):
+    """Goal joint positions of one arm, in the order of ``names``."""
+
+    names: tuple[str, ...] = Field(min_length=1, description="Joint names, base to tip.")
+    position_rad: tuple[FiniteFloat, ...] = Field(description="Goal joint positions, rad.")
+
+    @model_validator(mode="after")
+    def _same_length(self) -> ArmJointTarget:
+        if len(self.position_rad) != len(self.names):
+            raise ValueError(f"{len(self.names)} names but {len(self.position_rad)} positions")
+        return self
+
+
 class PlanTarget(Message):
     """The planner's current goal for both arms (answers control/status)."""
 
@@ -55,6 +68,17 @@ class PlanTarget(Message):
     max_tool_speed_m_s: NonNegFloat | None = Field(
         default=None, description="Optional per-phase tool speed cap, m/s."
     )
+    joints: dict[ArmRole, ArmJointTarget] | None = Field(
+        default=None,
+        description="A joint-space goal for both arms (the planner retracing the path the arms "
+        "came in by), instead of the two pose tasks: absolute and relative must then be None.",
+    )
+
+    @model_validator(mode="after")
+    def _one_kind_of_goal(self) -> PlanTarget:
+        if self.joints is not None and (self.absolute is not None or self.relative is not None):
+            raise ValueError("a joint goal comes without absolute and relative targets")
+        return self
 
 
 class ControlStatus(Message):

@@ -61,6 +61,15 @@ class Settings(ServiceSettings):
     max_relative_rate_rad_s: float = Field(
         default=1.0, gt=0, description="Collector-in-cutter rotation cap, rad/s."
     )
+    joint_gain_per_s: float = Field(
+        default=3.0, gt=0, description="K of a joint goal (the planner retracing a path), 1/s."
+    )
+    joint_speed_fraction: float = Field(
+        default=0.5,
+        gt=0,
+        le=1,
+        description="A joint goal moves each joint at most this fraction of its velocity limit.",
+    )
     converged_position_m: float = Field(
         default=0.001, gt=0, description="Converged: both position errors below this, m."
     )

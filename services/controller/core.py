@@ -19,7 +19,14 @@ from services.controller import DamperGroup, Settings
 from services.controller.dampers import DamperParams, damper_rows, inactive_rows
 from services.controller.distances import DistanceEngine, DistanceReport, PairKind
 from services.controller.hqp import LexicographicHQP, Weights
-from services.controller.inputs import Goals, Refusal, Workspace, goals, joint_positions
+from services.controller.inputs import (
+    Goals,
+    Refusal,
+    Workspace,
+    goals,
+    joint_goal,
+    joint_positions,
+)
 from services.controller.limits import check_command
 from services.controller.obstacles import (
     EMPTY,
@@ -29,7 +36,7 @@ from services.controller.obstacles import (
     obstacle_arrays,
 )
 from services.controller.robot import ControlledRobot
-from services.controller.targets import Gains, StepTarget, step_target
+from services.controller.targets import Gains, PoseGoal, StepTarget, step_target
 from services.controller.watchdog import Watchdog
 from services.robot.model import URDF_PATH
 from services.runtime import ConfigError, Output, Stamper
@@ -144,7 +151,11 @@ class ControllerCore:
 
     def _on_target(self, msg: PlanTarget) -> None:
         self.target = msg
-        got = goals(msg, self.robot.T_world_camera, self.workspace)
+        got = (
+            goals(msg, self.robot.T_world_camera, self.workspace)
+            if msg.joints is None
+            else self._joint_goals(msg)
+        )
         if isinstance(got, Refusal):
             self.counters.rejected_targets += 1
             self.goals, self.target_refused = (
@@ -153,6 +164,20 @@ class ControllerCore:
             )
         else:
             self.goals, self.target_refused = got, None
+
+    def _joint_goals(self, msg: PlanTarget) -> Goals | Refusal:
+        """A joint goal and the tool poses it puts the tools in (forward kinematics; the next
+        tick sets the measured joints again before anything else uses the robot)."""
+        r = self.robot
+        q = joint_goal(msg, r.by_role, r.lower_rad, r.upper_rad)
+        if isinstance(q, Refusal):
+            return q
+        cut, col = r.tool_frame["cutter"], r.tool_frame["collector"]
+        r.set_q(q)
+        T, T_rel = r.T_world(cut), r.T_a_b(cut, col)
+        return Goals(
+            PoseGoal(T[:3, 3], T[:3, :3], None), PoseGoal(T_rel[:3, 3], T_rel[:3, :3], None), q
+        )
 
     def _on_scene(self, msg: SceneState) -> None:
         try:
@@ -222,7 +247,12 @@ class ControllerCore:
         tick.active_dampers = rows.active
         tick.t_damper_s = time.perf_counter() - t
         t = time.perf_counter()
-        res = self.hqp.solve(tick.abs_step, tick.rel_step, rows, dt_s)
+        assert self.goals is not None
+        if self.goals.joints_rad is None:
+            res = self.hqp.solve(tick.abs_step, tick.rel_step, rows, dt_s)
+        else:
+            step = self._joint_step(q, self.goals.joints_rad, dt_s)
+            res = self.hqp.solve_joints(step, rows, dt_s)
         tick.t_solve_s = time.perf_counter() - t
         tick.fallback = res.fallback
         if res.dq is None:
@@ -266,6 +296,13 @@ class ControllerCore:
             dt_s,
         )
         return abs_step, rel_step
+
+    def _joint_step(self, q: np.ndarray, goal_rad: np.ndarray, dt_s: float) -> dict[str, float]:
+        """Per-step joint targets: q + K dt (goal − q), each joint capped at a fraction of its
+        velocity limit (the joint-space form of the tool law)."""
+        cap = self.s.joint_speed_fraction * self.robot.vmax_rad_s * dt_s
+        step = np.clip(self.s.joint_gain_per_s * dt_s * (goal_rad - q), -cap, cap)
+        return dict(zip(self.robot.names, (q + step).tolist(), strict=True))
 
     def _hold_reason(self, stamp_ns: int, stale: str | None) -> tuple[str | None, bool]:
         """Why this tick must hold (and whether it is the watchdog's doing), in order."""

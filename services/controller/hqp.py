@@ -77,6 +77,14 @@ class LexicographicHQP:
         self.hold = self.s2.add_joint_space_half_spaces_constraint(np.zeros((1, nq)), np.ones(1))
         self.hold.configure("hold_absolute", "hard", 1.0)
 
+        # A joint goal (retracing a path): one solve, the joints task under the same limits
+        # and dampers.
+        self.s0 = self._solver(placo, dt_s)
+        self.joints = self.s0.add_joints_task()
+        self.joints.configure("joints", "soft", 1.0)
+        self.s0.add_regularization_task(weights.regularization_abs)
+        self.damp0 = self.s0.add_joint_space_half_spaces_constraint(np.zeros((1, nq)), np.ones(1))
+
     def _solver(self, placo: Any, dt_s: float) -> Any:
         """A solver with the torso fixed and the URDF's position and velocity limits."""
         s = placo.KinematicsSolver(self.robot.robot)
@@ -121,6 +129,23 @@ class LexicographicHQP:
         except RuntimeError as exc:
             return HqpResult(dq1, "absolute_only", f"relative QP failed ({_short(exc)})")
         return HqpResult(dq2, fallback, reason)
+
+    def solve_joints(self, q_step: dict[str, float], rows: DamperRows, dt_s: float) -> HqpResult:
+        """Δq towards the per-step joint targets ``q_step`` (name → rad) under every
+        inequality; the dampers are softened only when the hard ones are infeasible."""
+        self.s0.dt = dt_s
+        self.joints.set_joints(q_step)
+        self.damp0.A, self.damp0.b = rows.A, rows.b
+        self.damp0.configure("dampers0", "hard", self.w.soft_damper)
+        try:
+            return HqpResult(np.array(self.s0.solve(False)), "none")
+        except RuntimeError as exc:
+            self.damp0.configure("dampers0", "soft", self.w.soft_damper)
+            try:
+                dq = np.array(self.s0.solve(False))
+            except RuntimeError as exc2:
+                return HqpResult(None, "stopped", f"QP infeasible even with soft dampers: {exc2}")
+            return HqpResult(dq, "softened", f"dampers softened ({_short(exc)})")
 
     def _dampers(self, priority: str) -> None:
         for i, c in enumerate((self.damp1, self.damp2)):

@@ -39,10 +39,42 @@ class Workspace:
 
 @dataclass(frozen=True)
 class Goals:
-    """A valid target: the absolute goal (world) and the relative goal (cutter frame)."""
+    """A valid target: the absolute goal (world) and the relative goal (cutter frame). A joint
+    goal (arm order, rad) comes with the tool poses it puts the tools in: the status reports
+    the tools' errors against those."""
 
     absolute: PoseGoal
     relative: PoseGoal
+    joints_rad: np.ndarray | None = None
+
+
+def joint_goal(
+    target: PlanTarget,
+    by_role: dict[ArmRole, tuple[str, ...]],
+    lower_rad: np.ndarray,
+    upper_rad: np.ndarray,
+) -> np.ndarray | Refusal:
+    """Arm-order goal positions of a joint target, rad: every joint of the model exactly once,
+    inside its limits."""
+    assert target.joints is not None
+    out: list[float] = []
+    for role in ARM_ROLES:
+        arm = target.joints.get(role)
+        if arm is None:
+            return Refusal(f"joint target has no {role} arm")
+        if tuple(arm.names) != by_role[role]:
+            return Refusal(f"joint target of the {role} arm names {arm.names}, not {by_role[role]}")
+        out += arm.position_rad
+    q = np.array(out, dtype=float)
+    bad = np.flatnonzero((q < lower_rad) | (q > upper_rad))
+    if bad.size:
+        names = [n for r in ARM_ROLES for n in by_role[r]]
+        i = int(bad[0])
+        return Refusal(
+            f"joint target {names[i]} = {q[i]:.3f} rad is outside its limits "
+            f"[{lower_rad[i]:.3f}, {upper_rad[i]:.3f}]"
+        )
+    return q
 
 
 def joint_positions(

@@ -123,6 +123,28 @@ class Settings(ServiceSettings):
         "and tried again when nothing else is left (a neighbour harvested meanwhile may clear "
         "the way); the second time it is unreachable.",
     )
+    retrace_after_stall: bool = Field(
+        default=True,
+        description="After a stalled approach or harvest, the arms go back along the joint path "
+        "they came in by (joint goals to the controller) to where the attempt began, before the "
+        "next fruit: arms caught across branches are freed whatever the scene (retrace.py).",
+    )
+    retrace_step_rad: float = Field(
+        default=0.1, gt=0, description="Retrace waypoints: one each time a joint moved this, rad."
+    )
+    retrace_lookahead_rad: float = Field(
+        default=0.15,
+        gt=0,
+        description="Retracing: on to the next waypoint once every joint is this close, rad.",
+    )
+    retrace_tolerance_rad: float = Field(
+        default=0.03,
+        gt=0,
+        description="Retracing: back at the start once every joint is this close, rad.",
+    )
+    retrace_timeout_s: float = Field(
+        default=15.0, gt=0, description="Retracing: limit (then on to the next fruit), s."
+    )
     leave_tolerance_m: float = Field(
         default=0.03, gt=0, description="Back at the pre-pose after a fruit: error below, m."
     )

@@ -113,6 +113,9 @@ class PlannerCore:
         self.basket_count = msg.fruit_count
 
     def _on_joint_state(self, js: JointState) -> None:
+        q = self.kin.arm_order(js)
+        if q is not None:
+            self.machine.note_joints(q)
         scene = self.pending_scene
         if scene is None or js.header.stamp_ns != scene.header.stamp_ns:
             return  # only the dish at camera stamps is needed (fruit are seen at those)
@@ -229,7 +232,9 @@ class PlannerCore:
     def _target(self, st: ControlStatus, goal: Goal) -> Any:
         self.targets_sent += 1
         header = self.stamper.answer("plan/target", st.header, frame_id="world")
-        return plan_target(header, goal.phase, goal.poses, goal.fruit_id, goal.ignore)
+        return plan_target(
+            header, goal.phase, goal.poses, goal.fruit_id, goal.ignore, goal.joints_rad
+        )
 
     def _count_contacts(self, st: ControlStatus) -> None:
         """Contacts by the controller's own distance model (robot-side; the sim's contact count

@@ -83,6 +83,10 @@ class Kinematics:
         self.cache_mm = cache_mm
         self._cache: dict[tuple[int, int, int, int], ReachVerdict] = {}
         self.ik_solves = 0
+        model = self.fk.model
+        idx = [model.joints[model.getJointId(n)].idx_q for r in ARM_ROLES for n in joint_names(r)]
+        self._lower_rad = np.array(model.lowerPositionLimit[idx], float)
+        self._upper_rad = np.array(model.upperPositionLimit[idx], float)
         self._set(HOME_RAD)
         T_cam = np.array(self.fk.get_T_world_frame(CAMERA_FRAME))
         self.camera_axis_world: np.ndarray = T_cam[:3, 2].copy()
@@ -102,6 +106,18 @@ class Kinematics:
             for name, v in zip(joint_names(role), q, strict=True):
                 self.fk.set_joint(name, float(v))
         self.fk.update_kinematics()
+
+    def arm_order(self, js: JointState) -> np.ndarray | None:
+        """Joint positions, cutter j1..j7 then collector j1..j7 (rad), clipped into the URDF
+        limits (a sim overshoots by a hair; a goal outside would be refused); None when an arm
+        or a joint is missing."""
+        q: list[float] = []
+        for role in ARM_ROLES:
+            arm = js.arms.get(role)
+            if arm is None or tuple(arm.names) != joint_names(role):
+                return None
+            q += arm.position_rad
+        return np.clip(np.array(q, float), self._lower_rad, self._upper_rad)
 
     def dish(self, js: JointState) -> DishPose | None:
         """The dish pose for a joint state; None when an arm or joint is missing."""

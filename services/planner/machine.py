@@ -38,6 +38,7 @@ from services.planner.clutter import blockers, clearable, same_fruit
 from services.planner.kinematics import Kinematics
 from services.planner.order import nearest_first, planned_order
 from services.planner.poses import PoseSettings, ToolPoses, harvest_pose, pre_pose
+from services.planner.retrace import JointPath, Retrace
 
 NS = 1_000_000_000
 
@@ -56,12 +57,14 @@ class Event:
 
 @dataclass(frozen=True)
 class Goal:
-    """What to send this tick: the phase, the poses (None: hold), the fruit, ignored IDs."""
+    """What to send this tick: the phase, the poses (None: hold, unless a joint goal), the
+    fruit, ignored IDs, and a joint goal (arm order, rad) when retracing."""
 
     phase: HarvestPhase
     poses: ToolPoses | None
     fruit_id: int | None = None
     ignore: tuple[int, ...] = ()
+    joints_rad: np.ndarray | None = None
 
 
 @dataclass
@@ -116,6 +119,19 @@ class Machine:
     finished: bool = False
     started: bool = False
     next_seq: int = 0
+    q_rad: np.ndarray | None = None  # the latest joint state, arm order
+    path: JointPath = field(default_factory=lambda: JointPath(0.1))
+    retrace: Retrace | None = None  # going back along ``path`` after a stall
+    retrace_touching: bool = False  # the stall was in the harvest: the target may be touched
+
+    def __post_init__(self) -> None:
+        self.path = JointPath(self.s.retrace_step_rad)
+
+    def note_joints(self, q_rad: np.ndarray) -> None:
+        """Every joint state (arm order): the path of the attempt, for retracing."""
+        self.q_rad = q_rad
+        if self.phase in ("approach", "harvest", "cut") and self.retrace is None:
+            self.path.note(q_rad)
 
     # ---- one tick ----------------------------------------------------------------------------
     def step(self, now_ns: int, st: ControlStatus, next_seq: int, basket: int | None) -> Goal:
@@ -148,6 +164,9 @@ class Machine:
         touching = self.phase in ("harvest", "cut", "leave")
         if self.verify is not None and self.looking:  # at the pre-pose: on to look from afar
             return Goal(self.phase, self._ready(), rec.fruit_id, self.book.ignore_ids(None))
+        if self.retrace is not None:
+            ignore = self.book.ignore_ids(rec if self.retrace_touching else None)
+            return Goal(self.phase, None, rec.fruit_id, ignore, self.retrace.goal)
         poses = pre_pose if self.phase in ("approach", "leave") else harvest_pose
         return Goal(
             self.phase,
@@ -251,6 +270,9 @@ class Machine:
         if self.verify is not None:
             self._verify(now, st)
             return
+        if self.retrace is not None:
+            self._retracing(now)
+            return
         reached = self._reached(st, self.s.leave_tolerance_m, loose=True)
         if reached or now - self.progress.since_ns > self.s.leave_timeout_s * NS:
             rec = self.target
@@ -258,6 +280,24 @@ class Machine:
                 self._end_attempt(rec, now)
             self.target = None
             self._select(now)
+
+    def _retracing(self, now: int) -> None:
+        """Back along the attempt's joint path; at its start (or stuck, or timed out) the
+        attempt ends and the next fruit is selected."""
+        r = self.retrace
+        assert r is not None
+        if self.q_rad is not None:
+            r.update(self.q_rad, now)
+        ended = self.q_rad is not None and r.done(self.q_rad)
+        stuck = r.stuck(now, self.s.no_progress_s)
+        if not (ended or stuck or now - r.since_ns > self.s.retrace_timeout_s * NS):
+            return
+        self.retrace = None
+        rec = self.target
+        if rec is not None:
+            self._end_attempt(rec, now)
+        self.target = None
+        self._select(now)
 
     def _verify(self, now: int, st: ControlStatus) -> None:
         """After an unconfirmed cut, at the ready pose: the fruit seen again where it was cut →
@@ -329,6 +369,7 @@ class Machine:
         if rec.started_ns is None:
             rec.started_ns = now
         rec.attempt_ns = now
+        self.path.start(self.q_rad)
         self.events.append(Event("fruit_selected", rec.fruit_id, reason=why))
         self._enter("approach", now)
 
@@ -542,6 +583,13 @@ class Machine:
         err = self.progress.best_m
         what = f"timed out after {timeout_s:.1f} s" if over else "no progress"
         detail = f"{self.phase} {what} (best task error {err * 1e3:.0f} mm)"
+        back = None
+        if self.s.retrace_after_stall and self.q_rad is not None:
+            back = Retrace.back_along(
+                self.path, now, self.s.retrace_lookahead_rad, self.s.retrace_tolerance_rad
+            )
+        if back is not None:
+            detail += f"; retracing {len(back.waypoints)} waypoints"
         if self.s.defer_blocked and not rec.deferred:
             # A neighbour or the trunk may hold the tools back; harvesting the others first
             # may clear the way: try once more when nothing else is left.
@@ -554,7 +602,11 @@ class Machine:
                 Event("fruit_skipped", rec.fruit_id, outcome="unreachable", reason=why)
             )
             self._finish(rec, now, "unreachable", why)
-        if leave:
+        if back is not None:
+            rec.frozen = rec.frozen or leave  # as the leave below: a harvest stall freezes
+            self.retrace, self.retrace_touching = back, leave
+            self._enter("leave", now)
+        elif leave:
             rec.frozen = True
             self._enter("leave", now)
         else:

@@ -1,6 +1,7 @@
 """The paper's poses (§IV-A, §IV-B) for one fruit, in the world frame: the harvest pose (cutter
 tip at the peduncle, dish under the fruit), the pre-pose d_z in front of it along the camera's
-optical axis, and the ready pose; and the PlanTarget that carries them.
+optical axis, and the ready pose; and the PlanTarget that carries them (or, when retracing, a
+joint goal).
 
 World-frame targets: the camera is rigid on the torso, so the paper's camera-frame poses are the
 same poses expressed in the world. Two deliberate readings of the paper:
@@ -18,10 +19,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from schemas.base import Header
-from schemas.control import AbsoluteTarget, HarvestPhase, PlanTarget, RelativeTarget
+from schemas.base import ARM_ROLES, ArmRole, Header
+from schemas.control import (
+    AbsoluteTarget,
+    ArmJointTarget,
+    HarvestPhase,
+    PlanTarget,
+    RelativeTarget,
+)
 from services.controller.geometry import matrix_to_quat_xyzw
-from services.robot.model import TOOLS
+from services.robot.model import TOOLS, joint_names
 from services.robot.reach import R_CUTTER_BASKET, R_WORLD_CUTTER_FORWARD
 
 Q_CUTTER_FORWARD = matrix_to_quat_xyzw(R_WORLD_CUTTER_FORWARD)
@@ -100,9 +107,19 @@ def plan_target(
     poses: ToolPoses | None,
     fruit_id: int | None = None,
     ignore: tuple[int, ...] = (),
+    joints_rad: np.ndarray | None = None,
 ) -> PlanTarget:
     """The message: cutter level and pointing forward, its turn about the vertical free (θ_a);
-    the dish under the tip, opening up, its turn about its normal free. None: hold still."""
+    the dish under the tip, opening up, its turn about its normal free. None: hold still. A
+    joint goal (arm order, rad) instead of poses: retracing."""
+    if joints_rad is not None:
+        return PlanTarget(
+            header=header,
+            phase=phase,
+            fruit_id=fruit_id,
+            ignore_fruit_ids=ignore,
+            joints=joint_target(joints_rad),
+        )
     if poses is None:
         return PlanTarget(header=header, phase=phase, fruit_id=fruit_id)
     t = poses.tip_world_m
@@ -128,3 +145,17 @@ def plan_target(
         ),
         ignore_fruit_ids=ignore,
     )
+
+
+def joint_target(q_rad: np.ndarray) -> dict[ArmRole, ArmJointTarget]:
+    """Arm-order joint positions (cutter j1..j7, collector j1..j7) as the message's per-arm
+    goals."""
+    out: dict[ArmRole, ArmJointTarget] = {}
+    i = 0
+    for role in ARM_ROLES:
+        names = joint_names(role)
+        out[role] = ArmJointTarget(
+            names=names, position_rad=tuple(float(v) for v in q_rad[i : i + len(names)])
+        )
+        i += len(names)
+    return out
