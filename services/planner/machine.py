@@ -123,6 +123,7 @@ class Machine:
     path: JointPath = field(default_factory=lambda: JointPath(0.1))
     retrace: Retrace | None = None  # going back along ``path`` after a stall
     retrace_touching: bool = False  # the stall was in the harvest: the target may be touched
+    left_because: str = ""  # the reason the next phase change carries (how a retrace ended)
 
     def __post_init__(self) -> None:
         self.path = JointPath(self.s.retrace_step_rad)
@@ -290,9 +291,16 @@ class Machine:
             r.update(self.q_rad, now)
         ended = self.q_rad is not None and r.done(self.q_rad)
         stuck = r.stuck(now, self.s.no_progress_s)
-        if not (ended or stuck or now - r.since_ns > self.s.retrace_timeout_s * NS):
+        over = now - r.since_ns > self.s.retrace_timeout_s * NS
+        if not (ended or stuck or over):
             return
         self.retrace = None
+        if ended:
+            self.left_because = "retraced to where the attempt began"
+        else:
+            short = r.remaining_rad(self.q_rad) if self.q_rad is not None else float("nan")
+            what = "stuck" if stuck else f"timed out after {self.s.retrace_timeout_s:.0f} s"
+            self.left_because = f"retrace {what}, {short:.2f} rad short of where the attempt began"
         rec = self.target
         if rec is not None:
             self._end_attempt(rec, now)
@@ -516,8 +524,10 @@ class Machine:
                 rec.fruit_id if rec is not None else None,
                 self.phase,
                 phase,
+                self.left_because,
             )
         )
+        self.left_because = ""
         self.phase = phase
         self.progress = Progress(now, self.next_seq)
         self.arrived_ns = None

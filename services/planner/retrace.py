@@ -81,5 +81,9 @@ class Retrace:
     def done(self, q: np.ndarray) -> bool:
         return self.i == len(self.waypoints) - 1 and _gap(q, self.goal) <= self.tolerance_rad
 
+    def remaining_rad(self, q: np.ndarray) -> float:
+        """How far the arms are from the path's end (the largest joint gap), rad."""
+        return _gap(q, self.waypoints[-1])
+
     def stuck(self, now_ns: int, after_s: float) -> bool:
         return now_ns - self.best_ns > after_s * NS

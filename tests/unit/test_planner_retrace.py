@@ -110,6 +110,8 @@ def test_a_stalled_approach_goes_back_along_its_joint_path() -> None:
         m.note_joints(q)
     assert np.abs(q - Q0).max() <= 0.03
     assert m.phase == "approach" and m.target is rec and m.retrace is None
+    back = [e for e in m.events if e.event == "phase_changed" and e.phase_from == "leave"]
+    assert back[-1].reason == "retraced to where the attempt began"
     # the messages are joint goals for both arms, no pose task, the fruit not ignored
     msg = targets[0]
     assert msg.joints is not None and msg.absolute is None and msg.relative is None
@@ -122,3 +124,14 @@ def test_without_retracing_the_next_fruit_is_taken_from_where_the_arms_are() -> 
     m = core.machine
     assert m.phase == "approach" and m.retrace is None  # straight on (the only fruit again)
     assert all(g.joints_rad is None for g in goals)
+
+
+def test_a_retrace_that_cannot_go_on_says_how_far_short_it_stopped() -> None:
+    core, _, t = drive_to_a_stall(retrace=True)
+    m = core.machine
+    while m.phase == "leave" and t < 20 * NS:  # the arms stay where they got stuck
+        t += TICK_NS
+        m.step(t, status(m.next_seq, 0.05, t), m.next_seq + 1, 0)
+    assert m.phase == "approach" and m.retrace is None
+    back = [e for e in m.events if e.event == "phase_changed" and e.phase_from == "leave"]
+    assert back[-1].reason == "retrace stuck, 0.90 rad short of where the attempt began"
