@@ -415,6 +415,15 @@ def _fates(
     return out
 
 
+def retraces(events: Sequence[Any]) -> dict[str, int]:
+    """Retraces after a stall (the skip event says "retracing"), and those that stopped short
+    of where the attempt began (the phase change that ends them says "retrace stuck / timed
+    out")."""
+    started = sum(1 for e in events if e.event == "fruit_skipped" and "retracing" in e.reason)
+    short = sum(1 for e in events if e.event == "phase_changed" and e.reason.startswith("retrace "))
+    return {"retraces": started, "retraces_short": short}
+
+
 def evaluate(
     got: Collected, first_truth: GroundTruth, planner_settings: dict[str, Any]
 ) -> dict[str, Any]:
@@ -464,6 +473,7 @@ def evaluate(
         "max_velocity_ratio": round(got.max_velocity_ratio, 4),
         "cycles_s": [round(c, 3) for c in cycles],
         "reachable_fates": _fates(record, reachable, collected, first_truth),
+        **retraces(got.harvest_events),
         "summary": s.model_dump(mode="json", exclude={"header"}) if s is not None else None,
     }
 
@@ -542,7 +552,7 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
     if not rows:
         return {}
     tot = {
-        k: sum(r[k] or 0 for r in rows)
+        k: sum(r.get(k) or 0 for r in rows)
         for k in (
             "fruit",
             "reachable",
@@ -559,6 +569,8 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "collisions",
             "target_contacts",
             "commands_clamped",
+            "retraces",
+            "retraces_short",
         )
     }
     cycles = [c for r in rows for c in r["cycles_s"]]
@@ -597,6 +609,8 @@ def table(result: dict[str, Any]) -> str:
         ("s_per_fruit_total", "run s per harvested fruit"),
         ("max_velocity_ratio", "peak |q̇| / limit"),
         ("commands_clamped", "commands clamped by the sim"),
+        ("retraces", "retraces after a stall"),
+        ("retraces_short", "  of which stopped short"),
         ("wall_s", "wall s"),
         ("rtf", "real-time factor"),
     )

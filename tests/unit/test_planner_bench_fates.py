@@ -91,3 +91,23 @@ def test_fates_add_up_over_runs() -> None:
     text = bench.table({"scenario": "x", "seeds": [0], "mode": "inproc", "policies": {"n": agg}})
     assert "where the reachable fruit went" in text
     assert any(line.split() == ["not_detected", "3"] for line in text.splitlines())
+
+
+def test_retraces_are_counted_from_the_planners_events() -> None:
+    from schemas.harvest import HarvestEvent
+
+    def ev(kind: str, reason: str) -> HarvestEvent:
+        return HarvestEvent(
+            header=Header(stamp_ns=0, seq=0, source="planner"),
+            event=kind,  # type: ignore[arg-type]
+            reason=reason,
+        )
+
+    events = [
+        ev("fruit_skipped", "blocked: approach no progress (…); retracing 9 waypoints; retried"),
+        ev("phase_changed", "retraced to where the attempt began"),
+        ev("fruit_skipped", "unreachable: harvest timed out (…); retracing 3 waypoints"),
+        ev("phase_changed", "retrace stuck, 0.40 rad short of where the attempt began"),
+        ev("fruit_skipped", "unreachable: blocked by #3 (in the tools' way)"),
+    ]
+    assert bench.retraces(events) == {"retraces": 2, "retraces_short": 1}
