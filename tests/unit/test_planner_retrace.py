@@ -7,29 +7,14 @@ from itertools import pairwise
 
 import numpy as np
 
-from schemas.base import Header
-from schemas.control import ControlStatus
 from services.planner.core import PlannerCore
 from services.planner.machine import Goal
 from services.planner.retrace import JointPath, Retrace
+from tests.unit.test_planner_bench_fates import NS, TICK_NS, status
 from tests.unit.test_planner_select import A, core_with, fruit
 
-NS = 1_000_000_000
-TICK_NS = 20_000_000
 Q0 = np.zeros(14)
 Q1 = np.linspace(0.2, 0.9, 14)  # where the approach got stuck
-
-
-def status(seq: int, err_m: float, t_ns: int) -> ControlStatus:
-    return ControlStatus(
-        header=Header(stamp_ns=t_ns, seq=t_ns // TICK_NS, source="controller"),
-        target_seq=seq,
-        abs_position_error_m=err_m,
-        abs_orientation_error_rad=0.0,
-        rel_position_error_m=0.0,
-        rel_orientation_error_rad=0.0,
-        converged=False,
-    )
 
 
 def test_the_path_keeps_a_waypoint_per_step() -> None:
