@@ -15,7 +15,8 @@
 * **cut**: one tool command, then wait for the basket's fruit count to go up (collected).
   After ``collect_timeout_s``: the fruit still seen on its branch → the cut failed: retry
   (harvest again) up to ``max_cut_attempts``, then give up (cut_failed); gone → dropped.
-* **leave**: back to the pre-pose of that fruit, then select.
+* **leave**: back to the pre-pose of that fruit, then select. After a stall, with
+  ``retrace_after_stall``: back along the attempt's joint path instead (retrace.py).
 * **home**: nothing to do: the ready pose; the run ends after ``finish_after_s`` there with no
   candidate (or at ``max_run_s``).
 
