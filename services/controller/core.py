@@ -172,6 +172,9 @@ class ControllerCore:
         q = joint_goal(msg, r.by_role, r.lower_rad, r.upper_rad)
         if isinstance(q, Refusal):
             return q
+        last = self.goals
+        if last is not None and last.joints_rad is not None and np.array_equal(last.joints_rad, q):
+            return last  # the planner re-sends its goal every tick: no FK again
         cut, col = r.tool_frame["cutter"], r.tool_frame["collector"]
         r.set_q(q)
         T, T_rel = r.T_world(cut), r.T_a_b(cut, col)

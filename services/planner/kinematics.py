@@ -107,26 +107,33 @@ class Kinematics:
                 self.fk.set_joint(name, float(v))
         self.fk.update_kinematics()
 
-    def arm_order(self, js: JointState) -> np.ndarray | None:
-        """Joint positions, cutter j1..j7 then collector j1..j7 (rad), clipped into the URDF
-        limits (a sim overshoots by a hair; a goal outside would be refused); None when an arm
-        or a joint is missing."""
-        q: list[float] = []
-        for role in ARM_ROLES:
-            arm = js.arms.get(role)
-            if arm is None or tuple(arm.names) != joint_names(role):
-                return None
-            q += arm.position_rad
-        return np.clip(np.array(q, float), self._lower_rad, self._upper_rad)
-
-    def dish(self, js: JointState) -> DishPose | None:
-        """The dish pose for a joint state; None when an arm or joint is missing."""
+    @staticmethod
+    def _by_role(js: JointState) -> dict[ArmRole, tuple[float, ...]] | None:
+        """Each arm's positions in the model's joint order; None when an arm or joint is
+        missing."""
         q: dict[ArmRole, tuple[float, ...]] = {}
         for role in ARM_ROLES:
             arm = js.arms.get(role)
             if arm is None or tuple(arm.names) != joint_names(role):
                 return None
             q[role] = arm.position_rad
+        return q
+
+    def arm_order(self, js: JointState) -> np.ndarray | None:
+        """Joint positions, cutter j1..j7 then collector j1..j7 (rad), clipped into the URDF
+        limits (a sim overshoots by a hair; a goal outside would be refused); None when an arm
+        or a joint is missing."""
+        q = self._by_role(js)
+        if q is None:
+            return None
+        flat = np.array([v for role in ARM_ROLES for v in q[role]], float)
+        return np.clip(flat, self._lower_rad, self._upper_rad)
+
+    def dish(self, js: JointState) -> DishPose | None:
+        """The dish pose for a joint state; None when an arm or joint is missing."""
+        q = self._by_role(js)
+        if q is None:
+            return None
         self._set(q)
         T = np.array(self.fk.get_T_world_frame(BASKET_FRAME))
         return DishPose(T[:3, 3].copy(), T[:3, 2].copy())

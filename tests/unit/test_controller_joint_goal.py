@@ -10,12 +10,12 @@ from pydantic import ValidationError
 
 from schemas import PlanTarget
 from schemas.base import ARM_ROLES, Header
-from schemas.control import ArmJointTarget
 from services.controller import Settings
 from services.controller.core import ControllerCore
 from services.controller.kinsim import KinematicSim, SafetyMonitor
 from services.controller.scenarios import fruit, harvest_target, run_loop, scene
-from services.robot.model import HOME_RAD, joint_names
+from services.planner.poses import joint_target as planner_joint_target
+from services.robot.model import HOME_RAD
 from services.runtime.settings import load_settings
 
 SETTINGS = load_settings(Settings, {})
@@ -29,17 +29,10 @@ SAFETY = {
 
 
 def joint_target(q_arm_order: np.ndarray, phase: str = "leave") -> PlanTarget:
-    arms, i = {}, 0
-    for r in ARM_ROLES:
-        names = joint_names(r)
-        arms[r] = ArmJointTarget(
-            names=names, position_rad=tuple(float(v) for v in q_arm_order[i : i + len(names)])
-        )
-        i += len(names)
     return PlanTarget(
         header=Header(stamp_ns=0, seq=0, source="planner", frame_id="world"),
         phase=phase,  # type: ignore[arg-type]
-        joints=arms,
+        joints=planner_joint_target(q_arm_order),
     )
 
 
