@@ -147,6 +147,39 @@ class Settings(ServiceSettings):
     retrace_timeout_s: float = Field(
         default=15.0, gt=0, description="Retracing: limit (then on to the next fruit), s."
     )
+    plan_approach: bool = Field(
+        default=False,
+        description="Approach along a planned joint path (RRT-Connect against the scene's "
+        "obstacles, motion.py) to the IK solution of the pre-pose, then the usual pose goals; "
+        "no path found: the pose goals at once.",
+    )
+    plan_margin_m: float = Field(
+        default=0.03,
+        gt=0,
+        le=0.1,
+        description="Planned paths keep the robot this far from the trunk, fruit and branch "
+        "spheres, m.",
+    )
+    plan_self_margin_m: float = Field(
+        default=0.005, ge=0, le=0.1, description="… and its bodies this far apart, m."
+    )
+    plan_escape_rad: float = Field(
+        default=0.3,
+        gt=0,
+        description="Within this of a path's end that is closer than the margins (arms among "
+        "the branches, a pre-pose in the crown), configurations need only be no closer, rad.",
+    )
+    plan_max_checks: int = Field(
+        default=3000,
+        ge=10,
+        description="A plan gives up after this many configurations checked (~0.3 ms each).",
+    )
+    plan_lookahead_rad: float = Field(
+        default=0.25,
+        gt=0,
+        description="Following a planned path: the joint goal this far ahead of the arms, rad "
+        "(the controller moves at joint_gain_per_s times it at most).",
+    )
     leave_tolerance_m: float = Field(
         default=0.03, gt=0, description="Back at the pre-pose after a fruit: error below, m."
     )

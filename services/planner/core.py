@@ -52,6 +52,10 @@ class PlannerCore:
                 s.dish_catch_margin_m,
             ),
         )
+        if s.plan_approach:
+            from services.planner.motion import ApproachPlanner
+
+            self.machine.motion = ApproachPlanner(s)
         self.stamper = Stamper(NAME)
         self.targets_sent = 0
         self.basket_count: int | None = None
@@ -144,6 +148,8 @@ class PlannerCore:
         now = st.header.stamp_ns
         if self.pending_scene is not None:
             self.book.update(self.pending_scene, self._in_dish)
+            if self.machine.motion is not None:
+                self.machine.motion.obstacles = self.pending_scene.obstacles
             self.pending_scene = None
             for old, new, fid in self.book.reborn:
                 log.info("track ID %d left fruit %d: another fruit (record %d)", fid, old, new)

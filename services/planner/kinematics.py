@@ -48,6 +48,7 @@ class ReachVerdict:
     yaw_deg: float | None
     tip_error_m: float
     basket_error_m: float
+    q_rad: tuple[float, ...] | None = None  # the IK's solution, arm order (reachable only)
 
     def why(self) -> str:
         return (
@@ -138,6 +139,12 @@ class Kinematics:
         T = np.array(self.fk.get_T_world_frame(BASKET_FRAME))
         return DishPose(T[:3, 3].copy(), T[:3, 2].copy())
 
+    def _solution(self) -> tuple[float, ...]:
+        """The IK solver's joints, arm order, clipped into the limits."""
+        r = self.solver.robot
+        q = [r.get_joint(n) for role in ARM_ROLES for n in joint_names(role)]
+        return tuple(np.clip(q, self._lower_rad, self._upper_rad).tolist())
+
     def reach(self, tip_world_m: np.ndarray, basket_below_m: float) -> ReachVerdict:
         """Can both tools take this pose (cutter level, some sampled yaw; dish under the tip)?
         Cached on the pose rounded to ``cache_mm``."""
@@ -153,7 +160,7 @@ class Kinematics:
                 np.asarray(tip_world_m, float), math.radians(yaw), self.iterations, basket_below_m
             )
             if pe < self.tolerance_m and be < self.tolerance_m:
-                verdict = ReachVerdict(True, yaw, pe, be)
+                verdict = ReachVerdict(True, yaw, pe, be, self._solution())
                 break
             if pe + be < sum(best):
                 best = (pe, be)

@@ -37,6 +37,7 @@ from services.planner import Settings
 from services.planner.book import FruitBook, FruitRecord
 from services.planner.clutter import blockers, clearable, same_fruit
 from services.planner.kinematics import Kinematics
+from services.planner.motion import ApproachPlanner
 from services.planner.order import nearest_first, planned_order
 from services.planner.poses import PoseSettings, ToolPoses, harvest_pose, pre_pose
 from services.planner.retrace import JointPath, Retrace
@@ -125,6 +126,8 @@ class Machine:
     retrace: Retrace | None = None  # going back along ``path`` after a stall
     retrace_touching: bool = False  # the stall was in the harvest: the target may be touched
     left_because: str = ""  # the reason the next phase change carries (how a retrace ended)
+    motion: ApproachPlanner | None = None  # plan_approach: planned joint paths to the pre-pose
+    following: bool = False  # ``retrace`` is the planned approach path, not a way back
 
     def __post_init__(self) -> None:
         self.path = JointPath(self.s.retrace_step_rad)
@@ -132,7 +135,9 @@ class Machine:
     def note_joints(self, q_rad: np.ndarray) -> None:
         """Every joint state (arm order): the path of the attempt, for retracing."""
         self.q_rad = q_rad
-        if self.phase in ("approach", "harvest", "cut") and self.retrace is None:
+        if self.phase in ("approach", "harvest", "cut") and (
+            self.retrace is None or self.following
+        ):
             self.path.note(q_rad)
 
     # ---- one tick ----------------------------------------------------------------------------
@@ -195,8 +200,12 @@ class Machine:
             else:
                 self.events.append(Event("fruit_lost", rec.fruit_id, reason=f"{why}; may retry"))
             self._end_attempt(rec, now)
+            self.retrace, self.following = None, False
             self.target = None
             self._select(now)
+            return
+        if self.following:
+            self._follow(now)
             return
         if self._reached(st, self.s.approach_tolerance_m, self.s.catch_tolerance_m):
             self._enter("harvest", now)
@@ -208,6 +217,51 @@ class Machine:
             self._enter("harvest", now)
             return
         self._check_stuck(now, self.s.approach_timeout_s, leave=False)
+
+    def _follow(self, now: int) -> None:
+        """Along the planned path; at its end (or stuck, or timed out) the pose goals take over
+        with the approach's whole time again."""
+        r = self.retrace
+        assert r is not None
+        if self.q_rad is not None:
+            r.update(self.q_rad, now)
+        ended = self.q_rad is not None and r.done(self.q_rad)
+        stuck = r.stuck(now, self.s.no_progress_s)
+        over = now - r.since_ns > self.s.approach_timeout_s * NS
+        if not (ended or stuck or over):
+            return
+        self.retrace, self.following = None, False
+        self.progress = Progress(now, self.next_seq)
+        if not ended:
+            rec = self.target
+            short = r.remaining_rad(self.q_rad) if self.q_rad is not None else float("nan")
+            what = "stuck" if stuck else "timed out"
+            why = f"planned path {what} {short:.2f} rad short of its end: pose goals"
+            self.events.append(Event("replanned", rec.fruit_id if rec else None, reason=why))
+
+    def _planned_approach(self, rec: FruitRecord) -> Retrace | None:
+        """A planned joint path to the pre-pose's IK solution (plan_approach), as a path to
+        follow; None: no planner, no joint state or no path (the pose goals)."""
+        verdict = rec.reach[1] if rec.reach is not None else None
+        if self.motion is None or self.q_rad is None or verdict is None or verdict.q_rad is None:
+            return None
+        seed = rec.fruit_id * 1000 + self.motion.plans
+        plan = self.motion.plan(self.q_rad, np.array(verdict.q_rad), seed)
+        self.left_because = plan.why
+        if plan.path is None:
+            return None
+        s = self.s
+        now = self.progress.since_ns
+        follow = Retrace(
+            plan.path,
+            s.plan_lookahead_rad,
+            s.retrace_tolerance_rad,
+            s.retrace_tolerance_rad / 2,
+            now,
+            best_ns=now,
+        )
+        follow.update(self.q_rad, now)  # the first goal ahead of the arms, not where they are
+        return follow
 
     def _harvest(self, now: int, st: ControlStatus, basket: int | None) -> None:
         rec = self.target
@@ -380,7 +434,11 @@ class Machine:
         rec.attempt_ns = now
         self.path.start(self.q_rad)
         self.events.append(Event("fruit_selected", rec.fruit_id, reason=why))
+        self.progress = Progress(now, self.next_seq)
+        follow = self._planned_approach(rec)
         self._enter("approach", now)
+        if follow is not None:
+            self.retrace, self.retrace_touching, self.following = follow, False, True
 
     def _nearest_pick(self, cands: list[FruitRecord], now: int) -> tuple[FruitRecord, str] | None:
         """The nearest candidate that can be harvested now; None: the candidates changed.

@@ -1,0 +1,120 @@
+"""The planned approach (services/planner/motion.py, freespace.py and the machine): a joint
+path from the arms' joints to the pre-pose's IK solution around the scene's obstacles, followed
+as joint goals, then the pose goals."""
+
+from __future__ import annotations
+
+from itertools import pairwise
+
+import numpy as np
+
+from schemas.base import ARM_ROLES
+from schemas.scene import Obstacles, SphereObstacle
+from services.planner.machine import Goal
+from services.planner.motion import ApproachPlanner
+from services.planner.poses import pre_pose
+from services.robot.model import HOME_RAD, TOOL_FRAME
+from tests.unit.test_planner_bench_fates import NS, TICK_NS, status
+from tests.unit.test_planner_select import A, core_with, fruit
+
+HOME = np.array([v for r in ARM_ROLES for v in HOME_RAD[r]], float)
+
+
+def planned_core():  # type: ignore[no-untyped-def]
+    """A core with one fruit at A, the real IK and the approach planner."""
+    core = core_with("nearest", fruit(1, A, 0.5))
+    m = core.machine
+    m.s = m.s.model_copy(update={"plan_approach": True})
+    m.motion = ApproachPlanner(m.s)
+    core.book.records[1].reach = None  # the real IK (the verdict carries its joints)
+    return core
+
+
+def pre_pose_joints(core) -> np.ndarray:  # type: ignore[no-untyped-def]
+    rec = core.book.records[1]
+    p = pre_pose(rec.planned, core.machine.pose_settings)
+    v = core.kin.reach(p.tip_world_m, p.basket_below_m)
+    assert v.reachable and v.q_rad is not None
+    return np.array(v.q_rad)
+
+
+def test_a_branch_on_the_straight_way_is_gone_round() -> None:
+    core = planned_core()
+    goal = pre_pose_joints(core)
+    planner = ApproachPlanner(core.machine.s)
+    space = planner.space
+    mid = HOME + 0.3 * (goal - HOME)
+    space.robot.set_q(mid)  # a branch where the cutter's tip would pass
+    tip = space.robot.T_world(TOOL_FRAME["cutter"])[:3, 3]
+    planner.obstacles = Obstacles(
+        spheres=(SphereObstacle(name="occupied_1", center_world_m=tuple(tip), radius_m=0.03),)
+    )
+    space.set_obstacles(planner.obstacles)
+    s = core.machine.s
+    assert space.clearance(mid).obstacles_m < 0  # the straight way hits it, the ends are clear
+    assert min(space.clearance(HOME).obstacles_m, space.clearance(goal).obstacles_m) > 0.04
+    plan = planner.plan(HOME, goal, seed=1)
+    assert plan.path is not None, plan.why
+    assert plan.why.startswith("planned joint path")
+    assert np.allclose(plan.path[0], HOME) and np.allclose(plan.path[-1], goal)
+    assert all(np.abs(b - a).max() <= 0.05 + 1e-9 for a, b in pairwise(plan.path))
+    for q in plan.path:
+        c = space.clearance(q)
+        assert c.obstacles_m >= s.plan_margin_m and c.self_m >= s.plan_self_margin_m
+
+
+def test_no_path_is_reported_and_the_pose_goals_are_used() -> None:
+    core = planned_core()
+    goal = pre_pose_joints(core)
+    planner = ApproachPlanner(core.machine.s.model_copy(update={"plan_max_checks": 50}))
+    planner.space.robot.set_q(HOME)
+    tip = planner.space.robot.T_world(TOOL_FRAME["cutter"])[:3, 3]
+    # a sphere swallowing the tool at the start, its surface farther than the escape allows
+    planner.obstacles = Obstacles(
+        spheres=(SphereObstacle(name="occupied_1", center_world_m=tuple(tip), radius_m=0.3),)
+    )
+    plan = planner.plan(HOME, goal, seed=1)
+    assert plan.path is None
+    assert plan.why.startswith("no planned path (") and plan.why.endswith("pose goals")
+
+
+def run(core, until_s: float) -> list[Goal]:  # type: ignore[no-untyped-def]
+    """The arms follow joint goals at 0.02 rad per tick (pose goals: they stay), the tools'
+    error is 0 once the pose goals come."""
+    m, t, q = core.machine, 0, HOME.copy()
+    m.note_joints(q)
+    goals: list[Goal] = []
+    while t < until_s * NS:
+        t += TICK_NS
+        err = 0.0 if goals and goals[-1].poses is not None and goals[-1].fruit_id else 0.1
+        g = m.step(t, status(m.next_seq, err, t), m.next_seq + 1, 0)
+        goals.append(g)
+        if g.joints_rad is not None:
+            q = q + np.clip(g.joints_rad - q, -0.02, 0.02)
+            m.note_joints(q)
+    return goals
+
+
+def test_the_approach_follows_the_path_then_sends_the_pose_goals() -> None:
+    core = planned_core()
+    goals = run(core, 6.0)
+    m = core.machine
+    approach = [g for g in goals if g.phase == "approach"]
+    joint = [k for k, g in enumerate(approach) if g.joints_rad is not None]
+    assert joint and joint[0] == 0  # the path first ...
+    i = joint[-1]
+    assert all(g.poses is not None and g.joints_rad is None for g in approach[i + 1 :])  # ...
+    assert len(approach) > i + 1  # ... then the pose goals
+    last = approach[i].joints_rad
+    assert last is not None and np.abs(last - pre_pose_joints(core)).max() < 1e-9
+    entered = [e for e in m.events if e.event == "phase_changed" and e.phase_to == "approach"]
+    assert entered[0].reason.startswith("planned joint path")
+    assert m.motion is not None and m.motion.found == 1
+
+
+def test_without_the_setting_there_is_no_path() -> None:
+    core = core_with("nearest", fruit(1, A, 0.5))
+    core.book.records[1].reach = None
+    goals = run(core, 2.0)
+    assert core.machine.motion is None
+    assert all(g.joints_rad is None for g in goals)
