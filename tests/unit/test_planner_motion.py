@@ -10,6 +10,7 @@ import numpy as np
 
 from schemas.base import ARM_ROLES
 from schemas.scene import Obstacles, SphereObstacle
+from services.planner.core import PlannerCore
 from services.planner.machine import Goal
 from services.planner.motion import ApproachPlanner
 from services.planner.poses import pre_pose
@@ -20,7 +21,7 @@ from tests.unit.test_planner_select import A, core_with, fruit
 HOME = np.array([v for r in ARM_ROLES for v in HOME_RAD[r]], float)
 
 
-def planned_core():  # type: ignore[no-untyped-def]
+def planned_core() -> PlannerCore:
     """A core with one fruit at A, the real IK and the approach planner."""
     core = core_with("nearest", fruit(1, A, 0.5))
     m = core.machine
@@ -30,7 +31,7 @@ def planned_core():  # type: ignore[no-untyped-def]
     return core
 
 
-def pre_pose_joints(core) -> np.ndarray:  # type: ignore[no-untyped-def]
+def pre_pose_joints(core: PlannerCore) -> np.ndarray:
     rec = core.book.records[1]
     p = pre_pose(rec.planned, core.machine.pose_settings)
     v = core.kin.reach(p.tip_world_m, p.basket_below_m)
@@ -78,7 +79,7 @@ def test_no_path_is_reported_and_the_pose_goals_are_used() -> None:
     assert plan.why.startswith("no planned path (") and plan.why.endswith("pose goals")
 
 
-def run(core, until_s: float) -> list[Goal]:  # type: ignore[no-untyped-def]
+def run(core: PlannerCore, until_s: float) -> list[Goal]:
     """The arms follow joint goals at 0.02 rad per tick (pose goals: they stay), the tools'
     error is 0 once the pose goals come."""
     m, t, q = core.machine, 0, HOME.copy()

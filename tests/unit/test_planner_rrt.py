@@ -7,7 +7,7 @@ from itertools import pairwise
 
 import numpy as np
 
-from services.planner.rrt import resample, rrt_connect
+from services.planner.rrt import PlanResult, Valid, resample, rrt_connect
 
 LO, HI = np.array([-1.0, -1.0]), np.array([1.0, 1.0])
 START, GOAL = np.array([-0.8, 0.0]), np.array([0.8, 0.0])
@@ -18,7 +18,7 @@ def wall_with_gap(q: np.ndarray) -> bool:
     return not (-0.1 <= q[0] <= 0.1 and q[1] < 0.6)
 
 
-def plan(valid, seed: int = 0, max_checks: int = 4000):  # type: ignore[no-untyped-def]
+def plan(valid: Valid, seed: int = 0, max_checks: int = 4000) -> PlanResult:
     return rrt_connect(
         START, GOAL, valid, LO, HI, np.random.default_rng(seed), 0.2, 0.02, max_checks
     )
