@@ -174,6 +174,13 @@ class Settings(ServiceSettings):
         ge=10,
         description="A plan gives up after this many configurations checked (~0.3 ms each).",
     )
+    plan_trunk_margin_m: float = Field(
+        default=0.08,
+        ge=0,
+        le=1,
+        description="Planning: the trunk cylinder is resized for the new target as the scene "
+        "does (its trunk_tool_margin_m): surface this far behind the fruit, m.",
+    )
     plan_lookahead_rad: float = Field(
         default=0.25,
         gt=0,

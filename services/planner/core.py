@@ -150,6 +150,7 @@ class PlannerCore:
             self.book.update(self.pending_scene, self._in_dish)
             if self.machine.motion is not None:
                 self.machine.motion.obstacles = self.pending_scene.obstacles
+                self.machine.motion.trunk = self.pending_scene.trunk
             self.pending_scene = None
             for old, new, fid in self.book.reborn:
                 log.info("track ID %d left fruit %d: another fruit (record %d)", fid, old, new)

@@ -23,6 +23,12 @@ class Clearance:
 
     obstacles_m: float
     self_m: float
+    nearest: str = ""  # the obstacle kind at obstacles_m: trunk, fruit or branch
+
+    def describe(self) -> str:
+        if not math.isfinite(self.obstacles_m):
+            return "clear"
+        return f"{self.obstacles_m * 1e3:.0f} mm ({self.nearest})"
 
 
 class FreeSpace:
@@ -53,12 +59,10 @@ class FreeSpace:
         self.checks += 1
         self.robot.set_q(q_rad)
         rep = self.engine.compute(self.obstacles, {})
-        obst = [rep.min_m.get(k) for k in ("trunk", "fruit", "branch")]
-        near = [d for d in obst if d is not None]
+        near = [(d, k) for k in ("trunk", "fruit", "branch") if (d := rep.min_m.get(k)) is not None]
         self_m = rep.min_m.get("self")
-        return Clearance(
-            min(near) if near else math.inf, math.inf if self_m is None else float(self_m)
-        )
+        d_m, kind = min(near) if near else (math.inf, "")
+        return Clearance(d_m, math.inf if self_m is None else float(self_m), kind)
 
 
 def validity(

@@ -246,7 +246,7 @@ class Machine:
         if self.motion is None or self.q_rad is None or verdict is None or verdict.q_rad is None:
             return None
         seed = rec.fruit_id * 1000 + self.motion.plans
-        plan = self.motion.plan(self.q_rad, np.array(verdict.q_rad), seed)
+        plan = self.motion.plan(self.q_rad, np.array(verdict.q_rad), rec.planned, seed)
         self.left_because = plan.why
         if plan.path is None:
             return None

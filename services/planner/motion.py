@@ -14,9 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from schemas.scene import Obstacles
+from schemas.scene import CylinderObstacle, Obstacles, Trunk
 from services.planner import Settings
 from services.planner.freespace import FreeSpace, validity
+from services.planner.poses import FruitShape
 from services.planner.rrt import PlanResult, rrt_connect
 
 
@@ -35,14 +36,20 @@ class ApproachPlanner:
         self.s = s
         self.space = FreeSpace(cull_m=max(s.plan_margin_m, s.plan_self_margin_m) + 0.02)
         self.obstacles: Obstacles | None = None
+        self.trunk: Trunk | None = None
         self.plans = 0
         self.found = 0
 
-    def plan(self, start: np.ndarray, goal: np.ndarray, seed: int) -> ApproachPlan:
+    def plan(
+        self, start: np.ndarray, goal: np.ndarray, target: FruitShape, seed: int
+    ) -> ApproachPlan:
+        """A path from ``start`` to ``goal`` (arm order, rad) for the approach to ``target``."""
         s = self.s
         self.plans += 1
         if self.obstacles is not None:
-            self.space.set_obstacles(self.obstacles)
+            self.space.set_obstacles(
+                trunk_for(self.obstacles, self.trunk, target, s.plan_trunk_margin_m)
+            )
         valid, c0, c1 = validity(
             self.space, start, goal, s.plan_margin_m, s.plan_self_margin_m, s.plan_escape_rad
         )
@@ -55,7 +62,7 @@ class ApproachPlanner:
             np.random.default_rng(seed),
             max_checks=s.plan_max_checks,
         )
-        ends = f"clearance {_mm(c0.obstacles_m)} at the start, {_mm(c1.obstacles_m)} at the end"
+        ends = f"clearance {c0.describe()} at the start, {c1.describe()} at the end"
         if res.path is None:
             return ApproachPlan(None, f"no planned path ({res.why}; {ends}): pose goals")
         self.found += 1
@@ -65,5 +72,28 @@ class ApproachPlanner:
         )
 
 
-def _mm(d_m: float) -> str:
-    return "clear" if not np.isfinite(d_m) else f"{d_m * 1e3:.0f} mm"
+def trunk_for(
+    obstacles: Obstacles, trunk: Trunk | None, target: FruitShape, margin_m: float
+) -> Obstacles:
+    """The obstacles with the trunk cylinder sized for ``target``, as the scene sizes it for the
+    selected fruit (its surface ``margin_m`` behind the fruit, never inside the trunk's own
+    radius). The scene state at hand was made for the fruit selected before: its cylinder may
+    reach past the new target and swallow the pre-pose."""
+    if not obstacles.cylinders or trunk is None:
+        return obstacles
+    cyl = obstacles.cylinders[0]
+    axis = np.array(cyl.axis_point_world_m, float)
+    h_m = float(np.hypot(*(target.centre_world_m[:2] - axis[:2])))
+    own_m = trunk.radius_m if trunk.radius_m is not None else _default_trunk_radius_m()
+    r_m = max(h_m - target.d_h_m - margin_m, own_m)
+    resized = CylinderObstacle(
+        name=cyl.name, axis_point_world_m=cyl.axis_point_world_m, radius_m=r_m
+    )
+    return obstacles.model_copy(update={"cylinders": (resized, *obstacles.cylinders[1:])})
+
+
+def _default_trunk_radius_m() -> float:
+    """The scene's radius for a trunk it does not measure (its 'paper' method)."""
+    from services.scene import Settings as SceneSettings
+
+    return float(SceneSettings.model_fields["trunk_default_radius_m"].default)

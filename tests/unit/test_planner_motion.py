@@ -7,13 +7,14 @@ from __future__ import annotations
 from itertools import pairwise
 
 import numpy as np
+import pytest
 
 from schemas.base import ARM_ROLES
-from schemas.scene import Obstacles, SphereObstacle
+from schemas.scene import CylinderObstacle, Obstacles, SphereObstacle, Trunk
 from services.planner.core import PlannerCore
 from services.planner.machine import Goal
-from services.planner.motion import ApproachPlanner
-from services.planner.poses import pre_pose
+from services.planner.motion import ApproachPlanner, trunk_for
+from services.planner.poses import FruitShape, pre_pose
 from services.robot.model import HOME_RAD, TOOL_FRAME
 from tests.unit.test_planner_bench_fates import NS, TICK_NS, status
 from tests.unit.test_planner_select import A, core_with, fruit
@@ -54,7 +55,7 @@ def test_a_branch_on_the_straight_way_is_gone_round() -> None:
     s = core.machine.s
     assert space.clearance(mid).obstacles_m < 0  # the straight way hits it, the ends are clear
     assert min(space.clearance(HOME).obstacles_m, space.clearance(goal).obstacles_m) > 0.04
-    plan = planner.plan(HOME, goal, seed=1)
+    plan = planner.plan(HOME, goal, core.book.records[1].planned, seed=1)
     assert plan.path is not None, plan.why
     assert plan.why.startswith("planned joint path")
     assert np.allclose(plan.path[0], HOME) and np.allclose(plan.path[-1], goal)
@@ -74,7 +75,7 @@ def test_no_path_is_reported_and_the_pose_goals_are_used() -> None:
     planner.obstacles = Obstacles(
         spheres=(SphereObstacle(name="occupied_1", center_world_m=tuple(tip), radius_m=0.3),)
     )
-    plan = planner.plan(HOME, goal, seed=1)
+    plan = planner.plan(HOME, goal, core.book.records[1].planned, seed=1)
     assert plan.path is None
     assert plan.why.startswith("no planned path (") and plan.why.endswith("pose goals")
 
@@ -119,3 +120,18 @@ def test_without_the_setting_there_is_no_path() -> None:
     goals = run(core, 2.0)
     assert core.machine.motion is None
     assert all(g.joints_rad is None for g in goals)
+
+
+def test_the_trunk_is_resized_for_the_new_target() -> None:
+    old = Obstacles(
+        cylinders=(
+            CylinderObstacle(name="trunk", axis_point_world_m=(1.0, 0.0, 0.0), radius_m=0.5),
+        )
+    )
+    trunk = Trunk(found=True, radius_m=0.1)
+    near = FruitShape(np.array([1.3, 0.0, 1.2]), 0.04, 0.04)  # 0.3 m from the axis
+    got = trunk_for(old, trunk, near, margin_m=0.08)
+    assert got.cylinders[0].radius_m == pytest.approx(0.3 - 0.04 - 0.08)
+    touching = FruitShape(np.array([1.15, 0.0, 1.2]), 0.04, 0.04)  # never inside the trunk
+    assert trunk_for(old, trunk, touching, 0.08).cylinders[0].radius_m == pytest.approx(0.1)
+    assert trunk_for(old, None, near, 0.08) is old  # no trunk estimate: as the scene has it
