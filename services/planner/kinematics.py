@@ -48,7 +48,6 @@ class ReachVerdict:
     yaw_deg: float | None
     tip_error_m: float
     basket_error_m: float
-    q_rad: tuple[float, ...] | None = None  # the IK's solution, arm order (reachable only)
 
     def why(self) -> str:
         return (
@@ -83,6 +82,7 @@ class Kinematics:
         self.yaws_deg, self.iterations, self.tolerance_m = yaws_deg, iterations, tolerance_m
         self.cache_mm = cache_mm
         self._cache: dict[tuple[int, int, int, int], ReachVerdict] = {}
+        self._solutions: dict[tuple[int, int, int, int], list[np.ndarray]] = {}
         self.ik_solves = 0
         model = self.fk.model
         idx = [model.joints[model.getJointId(n)].idx_q for r in ARM_ROLES for n in joint_names(r)]
@@ -139,11 +139,29 @@ class Kinematics:
         T = np.array(self.fk.get_T_world_frame(BASKET_FRAME))
         return DishPose(T[:3, 3].copy(), T[:3, 2].copy())
 
-    def _solution(self) -> tuple[float, ...]:
+    def _solution(self) -> np.ndarray:
         """The IK solver's joints, arm order, clipped into the limits."""
         r = self.solver.robot
         q = [r.get_joint(n) for role in ARM_ROLES for n in joint_names(role)]
-        return tuple(np.clip(q, self._lower_rad, self._upper_rad).tolist())
+        return np.clip(np.array(q, float), self._lower_rad, self._upper_rad)
+
+    def solutions(self, tip_world_m: np.ndarray, basket_below_m: float) -> list[np.ndarray]:
+        """The IK solutions of this pose at every sampled yaw that reaches it (arm order, rad):
+        the planned approach picks the one clearest of the obstacles. Cached like ``reach``."""
+        key = tuple(round(float(v) * 1e3 / self.cache_mm) for v in (*tip_world_m, basket_below_m))
+        got = self._solutions.get(key)  # type: ignore[arg-type]
+        if got is not None:
+            return got
+        out = []
+        for yaw in self.yaws_deg:
+            self.ik_solves += 1
+            pe, be = self.solver.solve(
+                np.asarray(tip_world_m, float), math.radians(yaw), self.iterations, basket_below_m
+            )
+            if pe < self.tolerance_m and be < self.tolerance_m:
+                out.append(self._solution())
+        self._solutions[key] = out  # type: ignore[index]
+        return out
 
     def reach(self, tip_world_m: np.ndarray, basket_below_m: float) -> ReachVerdict:
         """Can both tools take this pose (cutter level, some sampled yaw; dish under the tip)?
@@ -160,7 +178,7 @@ class Kinematics:
                 np.asarray(tip_world_m, float), math.radians(yaw), self.iterations, basket_below_m
             )
             if pe < self.tolerance_m and be < self.tolerance_m:
-                verdict = ReachVerdict(True, yaw, pe, be, self._solution())
+                verdict = ReachVerdict(True, yaw, pe, be)
                 break
             if pe + be < sum(best):
                 best = (pe, be)

@@ -242,11 +242,14 @@ class Machine:
     def _planned_approach(self, rec: FruitRecord) -> Retrace | None:
         """A planned joint path to the pre-pose's IK solution (plan_approach), as a path to
         follow; None: no planner, no joint state or no path (the pose goals)."""
-        verdict = rec.reach[1] if rec.reach is not None else None
-        if self.motion is None or self.q_rad is None or verdict is None or verdict.q_rad is None:
+        if self.motion is None or self.q_rad is None:
+            return None
+        p = pre_pose(rec.planned, self.pose_settings)
+        goals = self.kin.solutions(p.tip_world_m, p.basket_below_m)
+        if not goals:
             return None
         seed = rec.fruit_id * 1000 + self.motion.plans
-        plan = self.motion.plan(self.q_rad, np.array(verdict.q_rad), rec.planned, seed)
+        plan = self.motion.plan(self.q_rad, goals, rec.planned, seed)
         self.left_because = plan.why
         if plan.path is None:
             return None

@@ -41,15 +41,17 @@ class ApproachPlanner:
         self.found = 0
 
     def plan(
-        self, start: np.ndarray, goal: np.ndarray, target: FruitShape, seed: int
+        self, start: np.ndarray, goals: list[np.ndarray], target: FruitShape, seed: int
     ) -> ApproachPlan:
-        """A path from ``start`` to ``goal`` (arm order, rad) for the approach to ``target``."""
+        """A path from ``start`` to the clearest of ``goals`` (IK solutions of the pre-pose,
+        arm order, rad) for the approach to ``target``."""
         s = self.s
         self.plans += 1
         if self.obstacles is not None:
             self.space.set_obstacles(
                 trunk_for(self.obstacles, self.trunk, target, s.plan_trunk_margin_m)
             )
+        goal = max(goals, key=lambda q: self.space.clearance(q).obstacles_m)
         valid, c0, c1 = validity(
             self.space, start, goal, s.plan_margin_m, s.plan_self_margin_m, s.plan_escape_rad
         )

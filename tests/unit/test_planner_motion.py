@@ -35,12 +35,12 @@ def planned_core() -> PlannerCore:
 def pre_pose_joints(core: PlannerCore) -> np.ndarray:
     rec = core.book.records[1]
     p = pre_pose(rec.planned, core.machine.pose_settings)
-    v = core.kin.reach(p.tip_world_m, p.basket_below_m)
-    assert v.reachable and v.q_rad is not None
-    return np.array(v.q_rad)
+    solutions = core.kin.solutions(p.tip_world_m, p.basket_below_m)
+    assert solutions
+    return solutions[0]
 
 
-def test_a_branch_on_the_straight_way_is_gone_round() -> None:
+def test_a_branch_on_the_straight_way_is_gone_round_to_the_clearest_goal() -> None:
     core = planned_core()
     goal = pre_pose_joints(core)
     planner = ApproachPlanner(core.machine.s)
@@ -55,7 +55,7 @@ def test_a_branch_on_the_straight_way_is_gone_round() -> None:
     s = core.machine.s
     assert space.clearance(mid).obstacles_m < 0  # the straight way hits it, the ends are clear
     assert min(space.clearance(HOME).obstacles_m, space.clearance(goal).obstacles_m) > 0.04
-    plan = planner.plan(HOME, goal, core.book.records[1].planned, seed=1)
+    plan = planner.plan(HOME, [mid, goal], core.book.records[1].planned, seed=1)
     assert plan.path is not None, plan.why
     assert plan.why.startswith("planned joint path")
     assert np.allclose(plan.path[0], HOME) and np.allclose(plan.path[-1], goal)
@@ -75,7 +75,7 @@ def test_no_path_is_reported_and_the_pose_goals_are_used() -> None:
     planner.obstacles = Obstacles(
         spheres=(SphereObstacle(name="occupied_1", center_world_m=tuple(tip), radius_m=0.3),)
     )
-    plan = planner.plan(HOME, goal, core.book.records[1].planned, seed=1)
+    plan = planner.plan(HOME, [goal], core.book.records[1].planned, seed=1)
     assert plan.path is None
     assert plan.why.startswith("no planned path (") and plan.why.endswith("pose goals")
 
