@@ -424,6 +424,19 @@ def retraces(events: Sequence[Any]) -> dict[str, int]:
     return {"retraces": started, "retraces_short": short}
 
 
+def approach_plans(events: Sequence[Any]) -> dict[str, int]:
+    """Planned approaches (plan_approach): paths found and followed (the phase change into the
+    approach says "planned joint path"), none found ("no planned path"), paths left short of
+    their end ("planned path stuck / timed out")."""
+    into = [e.reason for e in events if e.event == "phase_changed" and e.phase_to == "approach"]
+    short = [e for e in events if e.event == "replanned" and e.reason.startswith("planned path ")]
+    return {
+        "approach_paths": sum(1 for r in into if r.startswith("planned joint path")),
+        "approach_no_path": sum(1 for r in into if r.startswith("no planned path")),
+        "approach_paths_short": len(short),
+    }
+
+
 def evaluate(
     got: Collected, first_truth: GroundTruth, planner_settings: dict[str, Any]
 ) -> dict[str, Any]:
@@ -474,6 +487,7 @@ def evaluate(
         "cycles_s": [round(c, 3) for c in cycles],
         "reachable_fates": _fates(record, reachable, collected, first_truth),
         **retraces(got.harvest_events),
+        **approach_plans(got.harvest_events),
         "summary": s.model_dump(mode="json", exclude={"header"}) if s is not None else None,
     }
 
@@ -571,6 +585,9 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "commands_clamped",
             "retraces",
             "retraces_short",
+            "approach_paths",
+            "approach_no_path",
+            "approach_paths_short",
         )
     }
     cycles = [c for r in rows for c in r["cycles_s"]]
@@ -611,6 +628,9 @@ def table(result: dict[str, Any]) -> str:
         ("commands_clamped", "commands clamped by the sim"),
         ("retraces", "retraces after a stall"),
         ("retraces_short", "  of which stopped short"),
+        ("approach_paths", "planned approach paths"),
+        ("approach_paths_short", "  of which left short"),
+        ("approach_no_path", "planned approaches without a path"),
         ("wall_s", "wall s"),
         ("rtf", "real-time factor"),
     )

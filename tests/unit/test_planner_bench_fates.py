@@ -111,3 +111,33 @@ def test_retraces_are_counted_from_the_planners_events() -> None:
         ev("fruit_skipped", "unreachable: blocked by #3 (in the tools' way)"),
     ]
     assert bench.retraces(events) == {"retraces": 2, "retraces_short": 1}
+
+
+def test_planned_approaches_are_counted_from_the_planners_events() -> None:
+    from schemas.harvest import HarvestEvent
+
+    def ev(kind: str, reason: str, to: str = "") -> HarvestEvent:
+        return HarvestEvent(
+            header=Header(stamp_ns=0, seq=0, source="planner"),
+            event=kind,  # type: ignore[arg-type]
+            phase_to=to,
+            reason=reason,
+        )
+
+    events = [
+        ev("phase_changed", "planned joint path 2.47 rad, 1028 checks (…)", "approach"),
+        ev("replanned", "planned path stuck 0.09 rad short of its end: pose goals"),
+        ev(
+            "phase_changed",
+            "no planned path (no path within 3000 checks; …): pose goals",
+            "approach",
+        ),
+        ev("phase_changed", "planned joint path 0.71 rad, 17 checks (…)", "approach"),
+        ev("phase_changed", "", "harvest"),
+        ev("replanned", "fruit moved 1.7 cm"),
+    ]
+    assert bench.approach_plans(events) == {
+        "approach_paths": 2,
+        "approach_no_path": 1,
+        "approach_paths_short": 1,
+    }
