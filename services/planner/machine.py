@@ -8,8 +8,8 @@
 * **select**: the next fruit by the order policy among the candidates; a fruit whose harvest
   pose or pre-pose the IK cannot reach is skipped as unreachable right there.
 * **approach**: the cutter to the pre-pose (d_z in front along the optical axis); the target
-  fruit is an obstacle. With ``plan_approach``: first along a planned joint path (motion.py). Lost (unseen too long) → back to select; stuck or timed out → skipped
-  as unreachable.
+  fruit is an obstacle. With ``plan_approach``: first along a planned joint path (motion.py).
+  Lost (unseen too long) → back to select; stuck or timed out → skipped as unreachable.
 * **harvest**: the cutter tip to the peduncle, the dish under the fruit; the fruit may be
   touched (``ignore_fruit_ids``). Stuck or timed out → unreachable, leave.
 * **cut**: one tool command, then wait for the basket's fruit count to go up (collected).
@@ -221,22 +221,15 @@ class Machine:
     def _follow(self, now: int) -> None:
         """Along the planned path; at its end (or stuck, or timed out) the pose goals take over
         with the approach's whole time again."""
-        r = self.retrace
-        assert r is not None
-        if self.q_rad is not None:
-            r.update(self.q_rad, now)
-        ended = self.q_rad is not None and r.done(self.q_rad)
-        stuck = r.stuck(now, self.s.no_progress_s)
-        over = now - r.since_ns > self.s.approach_timeout_s * NS
-        if not (ended or stuck or over):
+        end = self._path_end(now, self.s.approach_timeout_s)
+        if end is None:
             return
+        how, short = end
         self.retrace, self.following = None, False
         self.progress = Progress(now, self.next_seq)
-        if not ended:
+        if how != "ended":
             rec = self.target
-            short = r.remaining_rad(self.q_rad) if self.q_rad is not None else float("nan")
-            what = "stuck" if stuck else "timed out"
-            why = f"planned path {what} {short:.2f} rad short of its end: pose goals"
+            why = f"planned path {how} {short:.2f} rad short of its end: pose goals"
             self.events.append(Event("replanned", rec.fruit_id if rec else None, reason=why))
 
     def _planned_approach(self, rec: FruitRecord) -> Retrace | None:
@@ -343,27 +336,37 @@ class Machine:
     def _retracing(self, now: int) -> None:
         """Back along the attempt's joint path; at its start (or stuck, or timed out) the
         attempt ends and the next fruit is selected."""
-        r = self.retrace
-        assert r is not None
-        if self.q_rad is not None:
-            r.update(self.q_rad, now)
-        ended = self.q_rad is not None and r.done(self.q_rad)
-        stuck = r.stuck(now, self.s.no_progress_s)
-        over = now - r.since_ns > self.s.retrace_timeout_s * NS
-        if not (ended or stuck or over):
+        end = self._path_end(now, self.s.retrace_timeout_s)
+        if end is None:
             return
+        how, short = end
         self.retrace = None
-        if ended:
+        if how == "ended":
             self.left_because = "retraced to where the attempt began"
         else:
-            short = r.remaining_rad(self.q_rad) if self.q_rad is not None else float("nan")
-            what = "stuck" if stuck else f"timed out after {self.s.retrace_timeout_s:.0f} s"
+            what = how if how == "stuck" else f"{how} after {self.s.retrace_timeout_s:.0f} s"
             self.left_because = f"retrace {what}, {short:.2f} rad short of where the attempt began"
         rec = self.target
         if rec is not None:
             self._end_attempt(rec, now)
         self.target = None
         self._select(now)
+
+    def _path_end(self, now: int, timeout_s: float) -> tuple[str, float] | None:
+        """The path being followed (``retrace``): None while under way, else how it ended
+        ("ended", "stuck", "timed out") and how far the arms are from its end, rad."""
+        r = self.retrace
+        assert r is not None
+        if self.q_rad is not None:
+            r.update(self.q_rad, now)
+        short = r.remaining_rad(self.q_rad) if self.q_rad is not None else float("nan")
+        if self.q_rad is not None and r.done(self.q_rad):
+            return "ended", short
+        if r.stuck(now, self.s.no_progress_s):
+            return "stuck", short
+        if now - r.since_ns > timeout_s * NS:
+            return "timed out", short
+        return None
 
     def _verify(self, now: int, st: ControlStatus) -> None:
         """After an unconfirmed cut, at the ready pose: the fruit seen again where it was cut →
