@@ -154,11 +154,24 @@ class Settings(ServiceSettings):
         "no path found: the pose goals at once.",
     )
     plan_margin_m: float = Field(
-        default=0.03,
+        default=0.045,
         gt=0,
         le=0.1,
         description="Planned paths keep the robot this far from the trunk, fruit and branch "
-        "spheres, m.",
+        "spheres, m: above the controller's damper safety distances (trunk 3 cm), or the "
+        "dampers stop the arms on the path.",
+    )
+    plan_limit_margin_rad: float = Field(
+        default=0.1,
+        ge=0,
+        le=0.5,
+        description="… and every joint this far inside its limits, rad.",
+    )
+    plan_retries: int = Field(
+        default=1,
+        ge=0,
+        description="A planned path the arms cannot follow (stuck, timed out) is planned again "
+        "from where they are, this many times per attempt; then the pose goals.",
     )
     plan_self_margin_m: float = Field(
         default=0.005, ge=0, le=0.1, description="… and its bodies this far apart, m."

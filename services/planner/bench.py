@@ -426,10 +426,13 @@ def retraces(events: Sequence[Any]) -> dict[str, int]:
 
 def approach_plans(events: Sequence[Any]) -> dict[str, int]:
     """Planned approaches (plan_approach): paths found and followed (the phase change into the
-    approach says "planned joint path"), none found ("no planned path"), paths left short of
-    their end ("planned path stuck / timed out")."""
+    approach, or a plan made again, says "planned joint path"), none found ("no planned path"),
+    paths left short of their end ("planned path stuck / timed out")."""
     into = [e.reason for e in events if e.event == "phase_changed" and e.phase_to == "approach"]
     short = [e for e in events if e.event == "replanned" and e.reason.startswith("planned path ")]
+    into += [
+        e.reason.split("planned again, ", 1)[1] for e in short if "planned again, " in e.reason
+    ]
     return {
         "approach_paths": sum(1 for r in into if r.startswith("planned joint path")),
         "approach_no_path": sum(1 for r in into if r.startswith("no planned path")),

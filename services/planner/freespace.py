@@ -72,25 +72,32 @@ def validity(
     margin_m: float,
     self_margin_m: float,
     escape_rad: float,
+    limit_margin_rad: float = 0.0,
 ) -> tuple[object, Clearance, Clearance]:
-    """The validity test of a plan between ``start`` and ``goal``: clear by the margins; within
-    ``escape_rad`` of an end that is itself closer than the margin (the arms start among the
-    branches, the pre-pose sits in the crown), no closer than that end.
+    """The validity test of a plan between ``start`` and ``goal``: clear by the margins and
+    ``limit_margin_rad`` inside the joint limits (the controller slows a joint down near its
+    limit, the sim clamps it); within ``escape_rad`` of an end that is itself closer than the
+    margin (the arms start among the branches, the pre-pose sits in the crown), no closer than
+    that end.
 
     Returns the test and the clearances of both ends."""
     c_start, c_goal = space.clearance(start), space.clearance(goal)
     ends = [(start, c_start), (goal, c_goal)]
+    lo, hi = space.lower_rad + limit_margin_rad, space.upper_rad - limit_margin_rad
+
+    def near_end(q: np.ndarray) -> list[tuple[np.ndarray, Clearance]]:
+        return [(e, c) for e, c in ends if float(np.max(np.abs(q - e))) <= escape_rad]
 
     def valid(q: np.ndarray) -> bool:
+        if not bool(np.all((q >= lo) & (q <= hi))) and not near_end(q):
+            return False
         c = space.clearance(q)
         if c.obstacles_m >= margin_m and c.self_m >= self_margin_m:
             return True
-        for end, ce in ends:
-            if float(np.max(np.abs(q - end))) <= escape_rad:
-                ok_obst = c.obstacles_m >= min(margin_m, ce.obstacles_m) - 1e-3
-                ok_self = c.self_m >= min(self_margin_m, ce.self_m) - 1e-3
-                if ok_obst and ok_self:
-                    return True
-        return False
+        return any(
+            c.obstacles_m >= min(margin_m, ce.obstacles_m) - 1e-3
+            and c.self_m >= min(self_margin_m, ce.self_m) - 1e-3
+            for _end, ce in near_end(q)
+        )
 
     return valid, c_start, c_goal

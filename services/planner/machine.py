@@ -128,6 +128,7 @@ class Machine:
     left_because: str = ""  # the reason the next phase change carries (how a retrace ended)
     motion: ApproachPlanner | None = None  # plan_approach: planned joint paths to the pre-pose
     following: bool = False  # ``retrace`` is the planned approach path, not a way back
+    replans_left: int = 0  # planned paths still allowed this attempt after one was left
 
     def __post_init__(self) -> None:
         self.path = JointPath(self.s.retrace_step_rad)
@@ -219,16 +220,27 @@ class Machine:
         self._check_stuck(now, self.s.approach_timeout_s, leave=False)
 
     def _follow(self, now: int) -> None:
-        """Along the planned path; at its end (or stuck, or timed out) the pose goals take over
-        with the approach's whole time again."""
+        """Along the planned path; at its end the pose goals take over with the approach's
+        whole time again. Stuck or timed out: planned again from where the arms are
+        (``plan_retries`` times per attempt), then the pose goals."""
         end = self._path_end(now, self.s.approach_timeout_s)
         if end is None:
             return
         how, short = end
         self.retrace, self.following = None, False
         self.progress = Progress(now, self.next_seq)
+        rec = self.target
+        if how != "ended" and rec is not None and self.replans_left > 0:
+            self.replans_left -= 1
+            follow = self._planned_approach(rec)
+            why = f"planned path {how} {short:.2f} rad short of its end: planned again, "
+            why += self.left_because
+            self.left_because = ""
+            self.events.append(Event("replanned", rec.fruit_id, reason=why))
+            if follow is not None:
+                self.retrace, self.following = follow, True
+            return
         if how != "ended":
-            rec = self.target
             why = f"planned path {how} {short:.2f} rad short of its end: pose goals"
             self.events.append(Event("replanned", rec.fruit_id if rec else None, reason=why))
 
@@ -441,6 +453,7 @@ class Machine:
         self.path.start(self.q_rad)
         self.events.append(Event("fruit_selected", rec.fruit_id, reason=why))
         self.progress = Progress(now, self.next_seq)
+        self.replans_left = self.s.plan_retries
         follow = self._planned_approach(rec)
         self._enter("approach", now)
         if follow is not None:

@@ -53,14 +53,20 @@ class ApproachPlanner:
             )
         goal = max(goals, key=lambda q: self.space.clearance(q).obstacles_m)
         valid, c0, c1 = validity(
-            self.space, start, goal, s.plan_margin_m, s.plan_self_margin_m, s.plan_escape_rad
+            self.space,
+            start,
+            goal,
+            s.plan_margin_m,
+            s.plan_self_margin_m,
+            s.plan_escape_rad,
+            s.plan_limit_margin_rad,
         )
         res: PlanResult = rrt_connect(
             start,
             goal,
             valid,  # type: ignore[arg-type]
-            self.space.lower_rad,
-            self.space.upper_rad,
+            self.space.lower_rad + s.plan_limit_margin_rad,
+            self.space.upper_rad - s.plan_limit_margin_rad,
             np.random.default_rng(seed),
             max_checks=s.plan_max_checks,
         )

@@ -126,6 +126,11 @@ def test_planned_approaches_are_counted_from_the_planners_events() -> None:
 
     events = [
         ev("phase_changed", "planned joint path 2.47 rad, 1028 checks (…)", "approach"),
+        ev(
+            "replanned",
+            "planned path stuck 0.09 rad short of its end: planned again, planned "
+            "joint path 1.2 rad, 80 checks (…)",
+        ),
         ev("replanned", "planned path stuck 0.09 rad short of its end: pose goals"),
         ev(
             "phase_changed",
@@ -137,7 +142,7 @@ def test_planned_approaches_are_counted_from_the_planners_events() -> None:
         ev("replanned", "fruit moved 1.7 cm"),
     ]
     assert bench.approach_plans(events) == {
-        "approach_paths": 2,
+        "approach_paths": 3,
         "approach_no_path": 1,
-        "approach_paths_short": 1,
+        "approach_paths_short": 2,
     }

@@ -49,20 +49,23 @@ def test_a_branch_on_the_straight_way_is_gone_round_to_the_clearest_goal() -> No
     space.robot.set_q(mid)  # a branch where the cutter's tip would pass
     tip = space.robot.T_world(TOOL_FRAME["cutter"])[:3, 3]
     planner.obstacles = Obstacles(
-        spheres=(SphereObstacle(name="occupied_1", center_world_m=tuple(tip), radius_m=0.03),)
+        spheres=(SphereObstacle(name="occupied_1", center_world_m=tuple(tip), radius_m=0.02),)
     )
     space.set_obstacles(planner.obstacles)
     s = core.machine.s
     assert space.clearance(mid).obstacles_m < 0  # the straight way hits it, the ends are clear
-    assert min(space.clearance(HOME).obstacles_m, space.clearance(goal).obstacles_m) > 0.04
+    assert min(space.clearance(HOME).obstacles_m, space.clearance(goal).obstacles_m) > 0.05
     plan = planner.plan(HOME, [mid, goal], core.book.records[1].planned, seed=1)
     assert plan.path is not None, plan.why
     assert plan.why.startswith("planned joint path")
     assert np.allclose(plan.path[0], HOME) and np.allclose(plan.path[-1], goal)
     assert all(np.abs(b - a).max() <= 0.05 + 1e-9 for a, b in pairwise(plan.path))
+    lo, hi = space.lower_rad + s.plan_limit_margin_rad, space.upper_rad - s.plan_limit_margin_rad
     for q in plan.path:
         c = space.clearance(q)
         assert c.obstacles_m >= s.plan_margin_m and c.self_m >= s.plan_self_margin_m
+        far = min(np.abs(q - HOME).max(), np.abs(q - goal).max()) > s.plan_escape_rad
+        assert not far or bool(np.all((q >= lo) & (q <= hi)))  # inside the limits' margin
 
 
 def test_no_path_is_reported_and_the_pose_goals_are_used() -> None:
@@ -135,3 +138,16 @@ def test_the_trunk_is_resized_for_the_new_target() -> None:
     touching = FruitShape(np.array([1.15, 0.0, 1.2]), 0.04, 0.04)  # never inside the trunk
     assert trunk_for(old, trunk, touching, 0.08).cylinders[0].radius_m == pytest.approx(0.1)
     assert trunk_for(old, None, near, 0.08) is old  # no trunk estimate: as the scene has it
+
+
+def test_a_path_the_arms_cannot_follow_is_planned_again_then_left() -> None:
+    core = planned_core()
+    m, t = core.machine, 0
+    m.note_joints(HOME)  # the arms never move
+    while t < 10 * NS and not any(e.event == "fruit_skipped" for e in m.events):
+        t += TICK_NS
+        m.step(t, status(m.next_seq, 0.1, t), m.next_seq + 1, 0)
+    why = [e.reason for e in m.events if e.event == "replanned"]
+    assert why[0].startswith("planned path stuck") and "planned again, planned joint path" in why[0]
+    assert why[1].startswith("planned path stuck") and why[1].endswith("pose goals")
+    assert m.motion is not None and m.motion.plans == 3  # the plan, once again; the retry's
