@@ -147,11 +147,13 @@ class Settings(ServiceSettings):
     retrace_timeout_s: float = Field(
         default=15.0, gt=0, description="Retracing: limit (then on to the next fruit), s."
     )
-    plan_approach: bool = Field(
-        default=False,
-        description="Approach along a planned joint path (RRT-Connect against the scene's "
-        "obstacles, motion.py) to the IK solution of the pre-pose, then the usual pose goals; "
-        "no path found: the pose goals at once.",
+    plan_approach: Literal["off", "always", "after_stall"] = Field(
+        default="off",
+        description="Planned joint paths to the pre-pose (RRT-Connect against the scene's "
+        "obstacles to its clearest IK solution, motion.py), followed as joint goals, then the "
+        "usual pose goals. 'always': every approach starts along one (no path found: the pose "
+        "goals at once); 'after_stall': an approach whose pose goals stop making progress "
+        "gets one (once per attempt) before it is given up; 'off': pose goals only.",
     )
     plan_margin_m: float = Field(
         default=0.045,

@@ -425,18 +425,19 @@ def retraces(events: Sequence[Any]) -> dict[str, int]:
 
 
 def approach_plans(events: Sequence[Any]) -> dict[str, int]:
-    """Planned approaches (plan_approach): paths found and followed (the phase change into the
-    approach, or a plan made again, says "planned joint path"), none found ("no planned path"),
-    paths left short of their end ("planned path stuck / timed out")."""
-    into = [e.reason for e in events if e.event == "phase_changed" and e.phase_to == "approach"]
-    short = [e for e in events if e.event == "replanned" and e.reason.startswith("planned path ")]
-    into += [
-        e.reason.split("planned again, ", 1)[1] for e in short if "planned again, " in e.reason
+    """Planned approaches (plan_approach): paths found and followed, none found, paths left
+    short of their end. A plan is reported by the phase change into the approach ('always')
+    or a ``replanned`` event (after a stall, or planned again): "planned joint path …" or "no
+    planned path …"; a path left says "planned path stuck / timed out …"."""
+    reasons = [
+        e.reason
+        for e in events
+        if e.event == "replanned" or (e.event == "phase_changed" and e.phase_to == "approach")
     ]
     return {
-        "approach_paths": sum(1 for r in into if r.startswith("planned joint path")),
-        "approach_no_path": sum(1 for r in into if r.startswith("no planned path")),
-        "approach_paths_short": len(short),
+        "approach_paths": sum(1 for r in reasons if "planned joint path" in r),
+        "approach_no_path": sum(1 for r in reasons if "no planned path" in r),
+        "approach_paths_short": sum(1 for r in reasons if r.startswith("planned path ")),
     }
 
 

@@ -52,7 +52,7 @@ class PlannerCore:
                 s.dish_catch_margin_m,
             ),
         )
-        if s.plan_approach:
+        if s.plan_approach != "off":
             from services.planner.motion import ApproachPlanner
 
             self.machine.motion = ApproachPlanner(s)

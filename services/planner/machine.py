@@ -244,6 +244,23 @@ class Machine:
             why = f"planned path {how} {short:.2f} rad short of its end: pose goals"
             self.events.append(Event("replanned", rec.fruit_id if rec else None, reason=why))
 
+    def _plan_after_stall(self, rec: FruitRecord, now: int, detail: str) -> bool:
+        """plan_approach 'after_stall': the stalled pose goals give way to a planned joint path
+        from where the arms are (once per attempt). True: a path is being followed."""
+        if self.s.plan_approach != "after_stall" or self.replans_left <= 0:
+            return False
+        self.replans_left = 0
+        self.progress = Progress(now, self.next_seq)
+        follow = self._planned_approach(rec)
+        self.events.append(
+            Event("replanned", rec.fruit_id, reason=f"{detail}: {self.left_because}")
+        )
+        self.left_because = ""
+        if follow is None:
+            return False
+        self.retrace, self.retrace_touching, self.following = follow, False, True
+        return True
+
     def _planned_approach(self, rec: FruitRecord) -> Retrace | None:
         """A planned joint path to the pre-pose's IK solution (plan_approach), as a path to
         follow; None: no planner, no joint state or no path (the pose goals)."""
@@ -454,7 +471,7 @@ class Machine:
         self.events.append(Event("fruit_selected", rec.fruit_id, reason=why))
         self.progress = Progress(now, self.next_seq)
         self.replans_left = self.s.plan_retries
-        follow = self._planned_approach(rec)
+        follow = self._planned_approach(rec) if self.s.plan_approach == "always" else None
         self._enter("approach", now)
         if follow is not None:
             self.retrace, self.retrace_touching, self.following = follow, False, True
@@ -671,6 +688,8 @@ class Machine:
         err = self.progress.best_m
         what = f"timed out after {timeout_s:.1f} s" if over else "no progress"
         detail = f"{self.phase} {what} (best task error {err * 1e3:.0f} mm)"
+        if self.phase == "approach" and self._plan_after_stall(rec, now, detail):
+            return
         back = None
         if self.s.retrace_after_stall and self.q_rad is not None:
             back = Retrace.back_along(

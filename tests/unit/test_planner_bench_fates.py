@@ -139,10 +139,12 @@ def test_planned_approaches_are_counted_from_the_planners_events() -> None:
         ),
         ev("phase_changed", "planned joint path 0.71 rad, 17 checks (…)", "approach"),
         ev("phase_changed", "", "harvest"),
+        ev("replanned", "approach no progress (best task error 90 mm): planned joint path 2 rad"),
+        ev("replanned", "approach no progress (best task error 80 mm): no planned path (…)"),
         ev("replanned", "fruit moved 1.7 cm"),
     ]
     assert bench.approach_plans(events) == {
-        "approach_paths": 3,
-        "approach_no_path": 1,
+        "approach_paths": 4,
+        "approach_no_path": 2,
         "approach_paths_short": 2,
     }

@@ -26,7 +26,7 @@ def planned_core() -> PlannerCore:
     """A core with one fruit at A, the real IK and the approach planner."""
     core = core_with("nearest", fruit(1, A, 0.5))
     m = core.machine
-    m.s = m.s.model_copy(update={"plan_approach": True})
+    m.s = m.s.model_copy(update={"plan_approach": "always"})
     m.motion = ApproachPlanner(m.s)
     core.book.records[1].reach = None  # the real IK (the verdict carries its joints)
     return core
@@ -151,3 +151,27 @@ def test_a_path_the_arms_cannot_follow_is_planned_again_then_left() -> None:
     assert why[0].startswith("planned path stuck") and "planned again, planned joint path" in why[0]
     assert why[1].startswith("planned path stuck") and why[1].endswith("pose goals")
     assert m.motion is not None and m.motion.plans == 3  # the plan, once again; the retry's
+
+
+def test_after_a_stall_the_approach_gets_a_planned_path() -> None:
+    core = planned_core()
+    m = core.machine
+    m.s = m.s.model_copy(update={"plan_approach": "after_stall"})
+    t, q = 0, HOME.copy()
+    m.note_joints(q)
+    goals: list[Goal] = []
+    while t < 10 * NS and not any(e.phase_to == "harvest" for e in m.events):
+        t += TICK_NS
+        followed = any(g.joints_rad is not None for g in goals)
+        err = 0.0 if followed and goals[-1].joints_rad is None else 0.1  # stuck until the path
+        g = m.step(t, status(m.next_seq, err, t), m.next_seq + 1, 0)
+        goals.append(g)
+        if g.joints_rad is not None:
+            q = q + np.clip(g.joints_rad - q, -0.02, 0.02)
+            m.note_joints(q)
+    first = next(k for k, g in enumerate(goals) if g.joints_rad is not None)
+    assert first > 0 and all(g.poses is not None for g in goals[1:first])  # the pose goals first
+    why = [e.reason for e in m.events if e.event == "replanned"]
+    assert why[0].startswith("approach no progress") and "planned joint path" in why[0]
+    assert any(e.phase_to == "harvest" for e in m.events)
+    assert not any(e.event == "fruit_skipped" for e in m.events)
