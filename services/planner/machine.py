@@ -8,7 +8,8 @@
 * **select**: the next fruit by the order policy among the candidates; a fruit whose harvest
   pose or pre-pose the IK cannot reach is skipped as unreachable right there.
 * **approach**: the cutter to the pre-pose (d_z in front along the optical axis); the target
-  fruit is an obstacle. With ``plan_approach``: first along a planned joint path (motion.py).
+  fruit is an obstacle. ``plan_approach`` 'always': first along a planned joint path
+  (motion.py); 'after_stall': a stalled approach gets one before it is given up.
   Lost (unseen too long) → back to select; stuck or timed out → skipped as unreachable.
 * **harvest**: the cutter tip to the peduncle, the dish under the fruit; the fruit may be
   touched (``ignore_fruit_ids``). Stuck or timed out → unreachable, leave.
