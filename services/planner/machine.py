@@ -130,6 +130,7 @@ class Machine:
     motion: ApproachPlanner | None = None  # plan_approach: planned joint paths to the pre-pose
     following: bool = False  # ``retrace`` is the planned approach path, not a way back
     replans_left: int = 0  # planned paths still allowed this attempt after one was left
+    planned_after_stall: bool = False  # this attempt's stalled approach got its planned path
 
     def __post_init__(self) -> None:
         self.path = JointPath(self.s.retrace_step_rad)
@@ -247,10 +248,12 @@ class Machine:
 
     def _plan_after_stall(self, rec: FruitRecord, now: int, detail: str) -> bool:
         """plan_approach 'after_stall': the stalled pose goals give way to a planned joint path
-        from where the arms are (once per attempt). True: a path is being followed."""
-        if self.s.plan_approach != "after_stall" or self.replans_left <= 0:
+        from where the arms are (once per attempt, not planned again if the arms cannot follow
+        it). True: a path is being followed."""
+        if self.s.plan_approach != "after_stall" or self.planned_after_stall:
             return False
-        self.replans_left = 0
+        self.planned_after_stall = True
+        self.replans_left = 0  # the path after a stall is the attempt's last plan
         self.progress = Progress(now, self.next_seq)
         follow = self._planned_approach(rec)
         self.events.append(
@@ -472,6 +475,7 @@ class Machine:
         self.events.append(Event("fruit_selected", rec.fruit_id, reason=why))
         self.progress = Progress(now, self.next_seq)
         self.replans_left = self.s.plan_retries
+        self.planned_after_stall = False
         follow = self._planned_approach(rec) if self.s.plan_approach == "always" else None
         self._enter("approach", now)
         if follow is not None:

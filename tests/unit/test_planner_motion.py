@@ -156,7 +156,7 @@ def test_a_path_the_arms_cannot_follow_is_planned_again_then_left() -> None:
 def test_after_a_stall_the_approach_gets_a_planned_path() -> None:
     core = planned_core()
     m = core.machine
-    m.s = m.s.model_copy(update={"plan_approach": "after_stall"})
+    m.s = m.s.model_copy(update={"plan_approach": "after_stall", "plan_retries": 0})
     t, q = 0, HOME.copy()
     m.note_joints(q)
     goals: list[Goal] = []
