@@ -8,7 +8,7 @@ import shlex
 import sys
 from pathlib import Path
 
-DEFAULT_TRAIN = ("synth:400:1", "scripted@0.1")
+DEFAULT_TRAIN = ("synth:1200:1", "scripted@0.1")
 DEFAULT_VAL = ("synth:100:2",)
 
 
@@ -46,11 +46,27 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         help="where synth:N:SEED data sets are rendered once and reused",
     )
     d.add_argument("--weights", type=Path, help="where to write the selected weights")
-    d.add_argument("--epochs", type=int, default=60)
+    d.add_argument("--epochs", type=int, default=150)
     d.add_argument("--iters-per-epoch", type=int, default=40)
     d.add_argument("--batch", type=int, default=16)
     d.add_argument("--lr", type=float, default=2e-3)
     d.add_argument("--seed", type=int, default=0)
+    d.add_argument(
+        "--eval-every", type=int, default=4, help="validate every N epochs (and after the last)"
+    )
+    d.add_argument(
+        "--precision",
+        choices=("bf16", "fp32"),
+        default="bf16",
+        help="autocast of the forward pass: bf16 is ~2x faster on CPUs with AVX512-BF16 and on "
+        "GPUs; fp32 on older CPUs, where bf16 is emulated and slow",
+    )
+    d.add_argument(
+        "--ema-decay",
+        type=float,
+        default=0.998,
+        help="decay of the weight average that is validated and shipped (0: off)",
+    )
     d.add_argument("--threads", type=int, default=2, help="torch CPU threads (ignored on GPU)")
     d.add_argument("--resume", action="store_true", help="continue from OUT_DIR/last.pt")
     d.set_defaults(func=cmd_train_detector)
@@ -74,6 +90,9 @@ def cmd_train_detector(args: argparse.Namespace) -> int:
         batch=args.batch,
         lr=args.lr,
         seed=args.seed,
+        eval_every=args.eval_every,
+        precision=args.precision,
+        ema_decay=args.ema_decay,
         threads=args.threads,
         synth_cache=str(args.synth_cache),
     )

@@ -15,7 +15,14 @@ import numpy as np
 import torch
 
 from services.detector.data import letterbox
-from services.detector.net import ARCH_NAME, ARCH_VERSION, NetConfig, OrangeNet, decode
+from services.detector.net import (
+    ARCH_NAME,
+    ARCH_VERSION,
+    NetConfig,
+    OrangeNet,
+    decode,
+    fused_for_inference,
+)
 
 
 class WeightsError(ValueError):
@@ -78,7 +85,8 @@ def load_weights(path: Path) -> LoadedWeights:
 
 
 class OrangeDetector:
-    """Letterbox → OrangeNet → peaks → boxes in the original image's pixels."""
+    """Letterbox → OrangeNet (batch norms folded, channels-last) → peaks → boxes in the
+    original image's pixels. The network given is copied, never changed."""
 
     def __init__(
         self,
@@ -87,7 +95,7 @@ class OrangeDetector:
         top_k: int = 100,
         device: str | torch.device = "cpu",
     ) -> None:
-        self.net = net.eval().to(device)
+        self.net = fused_for_inference(net).to(device)
         self.device = torch.device(device)
         self.cfg = net.cfg
         self.score_min = score_min
@@ -105,7 +113,7 @@ class OrangeDetector:
             canvases.append(c)
             scales.append(s)
         x = torch.from_numpy(np.stack(canvases)).to(self.device)
-        x = x.permute(0, 3, 1, 2).float().div_(255.0)
+        x = x.permute(0, 3, 1, 2).float().div_(255.0).contiguous(memory_format=torch.channels_last)
         hm, ltrb = self.net(x)
         out = []
         for rgb, s, d in zip(

@@ -8,6 +8,7 @@ whole detector is free of anchors and of a separate NMS step.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import asdict, dataclass
 
 import torch
@@ -22,9 +23,9 @@ ARCH_VERSION = 1
 class NetConfig:
     """Architecture hyper-parameters; saved with the weights and checked when they are loaded."""
 
-    widths: tuple[int, int, int, int] = (16, 32, 64, 96)  # channels at strides 2, 4, 8, 16
-    blocks: tuple[int, int, int] = (1, 2, 2)  # residual blocks at strides 4, 8, 16
-    neck: int = 48  # channels of the upsampling path and the heads
+    widths: tuple[int, int, int, int] = (16, 40, 80, 160)  # channels at strides 2, 4, 8, 16
+    blocks: tuple[int, int, int] = (1, 2, 3)  # residual blocks at strides 4, 8, 16
+    neck: int = 64  # channels of the upsampling path and the heads
     input_w_px: int = 320
     input_h_px: int = 240
     stride: int = 4
@@ -122,6 +123,23 @@ class OrangeNet(nn.Module):
         # Distances in units of 16 px through softplus: positive, smooth, scale-friendly.
         ltrb = F.softplus(self.box_head(p)) * 16.0
         return hm, ltrb
+
+
+def fused_for_inference(net: OrangeNet) -> OrangeNet:
+    """A copy of the network in eval mode with every batch norm folded into the convolution
+    before it, in channels-last memory: the same function (to float rounding), ~25 % faster on
+    CPU. The original is left untouched (training goes on with it)."""
+    out = copy.deepcopy(net).eval()
+    for m in out.modules():
+        if (
+            isinstance(m, nn.Sequential)
+            and len(m) >= 2
+            and isinstance(m[0], nn.Conv2d)
+            and isinstance(m[1], nn.BatchNorm2d)
+        ):
+            m[0] = torch.nn.utils.fusion.fuse_conv_bn_eval(m[0], m[1])
+            m[1] = nn.Identity()
+    return out.to(memory_format=torch.channels_last)
 
 
 def decode(

@@ -22,6 +22,7 @@ import torch
 
 from services.detector.augment import mosaic, photometric, random_placement
 from services.detector.data import DatasetError, Sample, load_dataset
+from services.detector.ema import WeightAverage
 from services.detector.evaluate import evaluate
 from services.detector.infer import OrangeDetector, save_weights
 from services.detector.net import NetConfig, OrangeNet
@@ -102,7 +103,7 @@ class TrainConfig:
     val: list[DataSpec]
     out_dir: str
     weights_out: str
-    epochs: int = 60
+    epochs: int = 150
     iters_per_epoch: int = 40
     batch: int = 16
     lr: float = 2e-3
@@ -110,15 +111,28 @@ class TrainConfig:
     warmup_iters: int = 100
     mosaic_p: float = 0.5
     giou_weight: float = 5.0
-    eval_every: int = 2
+    eval_every: int = 4
     seed: int = 0
     threads: int = 2
+    # bf16 autocast: ~2x faster on CPUs with AVX512-BF16 (and on GPUs); fp32 where not.
+    precision: str = "bf16"
+    ema_decay: float = 0.998  # 0 turns the weight average off (the last iterate is validated)
     synth_cache: str = "runs/synth"
     net: dict[str, Any] = field(default_factory=lambda: NetConfig().to_dict())
 
 
 def pick_device() -> torch.device:
     return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+
+
+PRECISIONS = ("bf16", "fp32")
+
+
+def autocast(cfg: TrainConfig, device: torch.device) -> torch.autocast:
+    """The forward pass's autocast context for the configured precision."""
+    if cfg.precision not in PRECISIONS:
+        raise ValueError(f"precision {cfg.precision!r}: expected one of {PRECISIONS}")
+    return torch.autocast(device.type, dtype=torch.bfloat16, enabled=cfg.precision == "bf16")
 
 
 class _Pool:
@@ -192,6 +206,7 @@ def lr_at(cfg: TrainConfig, it: int) -> float:
 
 def validate(net: OrangeNet, specs: list[DataSpec], device: torch.device) -> dict[str, float]:
     """AP50 and AP50:95 per validation set (low score threshold, as AP needs)."""
+    was_training = net.training
     det = OrangeDetector(net, score_min=0.01, device=device)
     out: dict[str, float] = {}
     for s in specs:
@@ -200,7 +215,7 @@ def validate(net: OrangeNet, specs: list[DataSpec], device: torch.device) -> dic
         name = Path(s.json_path).stem
         out[f"{name}/ap50"] = m.ap50
         out[f"{name}/ap50_95"] = m.ap50_95
-    net.train()
+    net.train(was_training)
     return out
 
 
@@ -218,6 +233,8 @@ def train(
     ncfg = NetConfig.from_dict(cfg.net)
     net = OrangeNet(ncfg).to(device)
     opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    ema = WeightAverage(net, cfg.ema_decay) if cfg.ema_decay > 0 else None
+    shipped = ema.model if ema else net  # what is validated, selected and saved
     out = Path(cfg.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     cfg.train = resolve(cfg.train, None, Path(cfg.synth_cache), log)
@@ -230,6 +247,8 @@ def train(
         ck = torch.load(out / "last.pt", map_location=device, weights_only=False)
         net.load_state_dict(ck["model"])
         opt.load_state_dict(ck["opt"])
+        if ema:
+            ema.load_state_dict(ck["ema"])
         start_epoch, best, history = ck["epoch"] + 1, ck["best"], ck["history"]
         log(f"resumed from {out / 'last.pt'} at epoch {start_epoch}")
     pool = _Pool(cfg.train)
@@ -244,7 +263,10 @@ def train(
             for g in opt.param_groups:
                 g["lr"] = lr_at(cfg, it)
             x, heat, box_t, weight = (t.to(device) for t in make_batch(pool, cfg, ncfg, rng))
-            hm, ltrb = net(x)
+            with autocast(cfg, device):
+                hm, ltrb = net(x)
+            # The losses in fp32: focal terms of tiny probabilities lose everything in bf16.
+            hm, ltrb = hm.float(), ltrb.float()
             loss = focal_loss(hm, heat) + cfg.giou_weight * giou_loss(
                 ltrb, box_t, weight, ncfg.stride
             )
@@ -252,6 +274,8 @@ def train(
             loss.backward()
             torch.nn.utils.clip_grad_norm_(net.parameters(), 10.0)
             opt.step()
+            if ema:
+                ema.update(net)
             losses.append(loss.item())
             if on_iter:
                 on_iter(it + 1, cfg.epochs * cfg.iters_per_epoch, float(np.mean(losses[-20:])))
@@ -261,19 +285,20 @@ def train(
             "s": time.perf_counter() - t0,
         }
         if (epoch + 1) % cfg.eval_every == 0 or epoch + 1 == cfg.epochs:
-            metrics = validate(net, cfg.val, device)
+            metrics = validate(shipped, cfg.val, device)
             row.update(metrics)
             aps = [v for k, v in metrics.items() if k.endswith("/ap50")]
             score = float(np.mean(aps)) if aps else -float(row["loss"])
             if score > best["score"]:
                 best = {"score": score, "epoch": epoch, "metrics": metrics}
-                save_weights(out / "best.pt", net, {"epoch": epoch, "val": metrics})
+                save_weights(out / "best.pt", shipped, {"epoch": epoch, "val": metrics})
         history.append(row)
         log(json.dumps(row))
         torch.save(
             {
                 "model": net.state_dict(),
                 "opt": opt.state_dict(),
+                "ema": ema.state_dict() if ema else None,
                 "epoch": epoch,
                 "best": best,
                 "history": history,
