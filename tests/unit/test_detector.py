@@ -164,3 +164,50 @@ def test_training_is_seeded_and_resumes_to_the_same_weights(tmp_path: Path) -> N
 
 def best_state(tmp_path: Path) -> dict[str, torch.Tensor]:
     return dict(load_weights(tmp_path / "b" / "best.pt").net.state_dict())
+
+
+def test_weight_average_starts_at_the_net_and_follows_it_with_a_ramped_decay() -> None:
+    from services.detector.ema import WeightAverage
+
+    net = OrangeNet(SMALL)
+    ema = WeightAverage(net, decay=0.9, ramp_updates=1.0)
+    first = {k: v.clone() for k, v in net.state_dict().items()}
+    with torch.no_grad():
+        for p in net.parameters():
+            p.add_(1.0)
+    ema.update(net)  # decay 0.9 * (1 - e^-1) = 0.569: 43 % of the way to the moved weights
+    d = ema.current_decay()
+    assert 0.56 < d < 0.58
+    name = next(k for k, _ in net.named_parameters())
+    torch.testing.assert_close(ema.model.state_dict()[name], first[name] + (1 - d))
+    assert not any(p.requires_grad for p in ema.model.parameters())
+    with pytest.raises(ValueError, match="decay 1.0"):
+        WeightAverage(net, decay=1.0)
+
+
+def test_inference_folds_batch_norms_without_changing_the_outputs_or_the_given_net() -> None:
+    from services.detector.net import fused_for_inference
+
+    torch.manual_seed(0)
+    net = OrangeNet(SMALL)
+    net.train()
+    for _ in range(3):  # give the batch norms statistics of their own
+        net(torch.rand(4, 3, 48, 64))
+    net.eval()
+    x = torch.rand(2, 3, 48, 64)
+    fused = fused_for_inference(net)
+    assert not any(isinstance(m, torch.nn.BatchNorm2d) for m in fused.modules())
+    assert any(isinstance(m, torch.nn.BatchNorm2d) for m in net.modules())
+    with torch.inference_mode():
+        for a, b in zip(
+            net(x), fused(x.contiguous(memory_format=torch.channels_last)), strict=True
+        ):
+            torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-4)
+
+
+def test_an_unknown_training_precision_is_refused_by_name() -> None:
+    from services.detector.train import TrainConfig, autocast
+
+    cfg = TrainConfig(train=[], val=[], out_dir="x", weights_out="x.pt", precision="fp8")
+    with pytest.raises(ValueError, match="precision 'fp8'"):
+        autocast(cfg, torch.device("cpu"))
