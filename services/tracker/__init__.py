@@ -71,8 +71,10 @@ class Settings(ServiceSettings):
     max_depth_step_m: float = Field(
         default=0.1,
         gt=0.0,
-        description="A confirmed track takes a box only within this of its depth (when both are "
-        "known; cascade and containment stages), m.",
+        description="A confirmed track takes a box only if it reads at most this much deeper "
+        "than the track (when both are known; cascade and containment stages), m. A box reading "
+        "nearer by more is an occluded view (something in front of the fruit): it may match, "
+        "but its depth is not averaged into the track's.",
     )
     frame_buffer: int = Field(
         default=8, ge=1, le=64, description="Camera frames kept to join with their detections."

@@ -15,11 +15,14 @@
    detection larger than ``max_containment_growth`` times the largest box the track ever had
    is not taken (a hand's box contains the fruit it covers).
    (Ours, cascade and containment) A confirmed track takes a box only within
-   ``max_shift_sides`` of its whole box's side from its last matched box and within
-   ``max_depth_step_m`` of its depth: fruit hang still, while the Kalman covariance of
+   ``max_shift_sides`` of its whole box's side from its last matched box and at most
+   ``max_depth_step_m`` deeper than its depth: fruit hang still, while the Kalman covariance of
    a coasting track grows without bound (after 10 s its gate spans the image, and one
    sighting does not shrink its velocity part), so the track of a harvested fruit would
-   otherwise take the box of another fruit.
+   otherwise take the box of another fruit. A box reading *nearer* than that is an occluded
+   view (a hand or a leaf in front: its pixels are in the box) and may match, but its depth is
+   not averaged into the track's: the fruit did not come nearer, and a track whose depth had
+   followed the hand would refuse the fruit's own box when the hand has passed.
 5. Unmatched tracks are marked missed; unmatched detections start tentative tracks with IDs
    from this tracker's own counter (1, 2, ...).
 """
@@ -27,7 +30,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -78,7 +81,7 @@ class Tracker:
         """Update with this frame's measurements; returns detection index → track ID."""
         matches, unmatched_tracks, unmatched_dets = self._match(dets)
         for ti, di in matches:
-            self.tracks[ti].update(self.kf, dets[di])
+            self.tracks[ti].update(self.kf, self._unoccluded(self.tracks[ti], dets[di]))
         for ti in unmatched_tracks:
             self.tracks[ti].mark_missed()
         assigned = {di: self.tracks[ti].track_id for ti, di in matches}
@@ -97,6 +100,18 @@ class Tracker:
             self.tracks.append(t)
         self.tracks = [t for t in self.tracks if not t.deleted]
         return assigned
+
+    def _unoccluded(self, t: Track, m: Measurement) -> Measurement:
+        """The measurement without its depth when it reads nearer than the confirmed track by
+        more than ``max_depth_step_m``: the depth of whatever is in front of the fruit."""
+        if (
+            t.confirmed
+            and t.depth_m is not None
+            and m.depth_m is not None
+            and m.depth_m < t.depth_m - self.p.max_depth_step_m
+        ):
+            return replace(m, depth_m=None)
+        return m
 
     # ---- matching --------------------------------------------------------------------------
     def _gated_cost(self, tis: Sequence[int], dis: Sequence[int], dets: Sequence[Measurement]):
@@ -121,8 +136,8 @@ class Tracker:
     def _far_from_last(self, tis: Sequence[int], zs: np.ndarray, depths: np.ndarray) -> np.ndarray:
         """(T, N) True where the detection (xyah rows ``zs``) lies farther from the track's last
         matched box than ``max_shift_sides`` times the side of the fruit's whole box (the
-        square root of the largest box area the track matched), or off its depth by more
-        than ``max_depth_step_m`` (both known). Also for a track seen in the last frame:
+        square root of the largest box area the track matched), or reads deeper than the track
+        by more than ``max_depth_step_m`` (both known; nearer is an occluder in front). Also for a track seen in the last frame:
         one sighting after a long coast leaves the velocity covariance huge, so the next
         prediction's gate is still wide (paper-exp1: a harvested fruit's track, re-acquired on
         a stray box where the fruit was, took the next fruit's box one frame later)."""
@@ -134,17 +149,18 @@ class Tracker:
             [np.nan if self.tracks[t].depth_m is None else self.tracks[t].depth_m for t in tis]
         )
         with np.errstate(invalid="ignore"):
-            jump = np.abs(td[:, None] - depths[None, :])
-        return far | (np.nan_to_num(jump, nan=0.0) > self.p.max_depth_step_m)
+            deeper = depths[None, :] - td[:, None]
+        return far | (np.nan_to_num(deeper, nan=0.0) > self.p.max_depth_step_m)
 
     def _depth_jumps(self, tis: Sequence[int], depths: np.ndarray) -> np.ndarray:
-        """(T, N) True where both depths are known and differ by more than the gate."""
+        """(T, N) True where both depths are known and the detection reads deeper than the
+        track by more than the gate (nearer: an occluder in front, see ``_unoccluded``)."""
         td = np.array(
             [np.nan if self.tracks[t].depth_m is None else self.tracks[t].depth_m for t in tis]
         )
         with np.errstate(invalid="ignore"):
-            jump = np.abs(td[:, None] - depths[None, :])
-        return np.nan_to_num(jump, nan=0.0) > self.p.max_depth_jump_m
+            deeper = depths[None, :] - td[:, None]
+        return np.nan_to_num(deeper, nan=0.0) > self.p.max_depth_jump_m
 
     def _iou_cost(self, tis: Sequence[int], dis: Sequence[int], dets: Sequence[Measurement]):
         boxes = np.stack([dets[d].xyxy_px for d in dis])

@@ -91,6 +91,19 @@ def test_depth_gate_refuses_a_fruit_at_another_depth() -> None:
     assert step(tr, [BOX_A], [1.1]) == {0: 2}
 
 
+def test_a_hand_in_front_of_a_fruit_neither_takes_nor_moves_its_depth() -> None:
+    # The sim's occlusion suite: the box of a fruit 0.81 m deep reads the hand's 0.47 m for the
+    # frames the hand enters it. That view is the fruit's (same box) but not its depth; a track
+    # whose depth had followed the hand refused the fruit's own box after it (a new ID).
+    tr = Tracker(TrackerParams(n_init=2))
+    for _ in range(5):
+        step(tr, [BOX_A], [0.81])
+    for _ in range(3):
+        assert step(tr, [BOX_A], [0.47]) == {0: 1}
+    assert tr.tracks[0].depth_m is not None and abs(tr.tracks[0].depth_m - 0.81) < 1e-9
+    assert step(tr, [BOX_A], [0.815]) == {0: 1}
+
+
 def test_min_cost_matching_leaves_costly_pairs_unmatched() -> None:
     cost = np.array([[0.1, 0.9], [0.8, 0.95]])
     matches, ut, ud = min_cost_matching(lambda t, d: cost[np.ix_(t, d)], 0.5, [0, 1], [0, 1])
