@@ -137,10 +137,11 @@ class Tracker:
         """(T, N) True where the detection (xyah rows ``zs``) lies farther from the track's last
         matched box than ``max_shift_sides`` times the side of the fruit's whole box (the
         square root of the largest box area the track matched), or reads deeper than the track
-        by more than ``max_depth_step_m`` (both known; nearer is an occluder in front). Also for a track seen in the last frame:
-        one sighting after a long coast leaves the velocity covariance huge, so the next
-        prediction's gate is still wide (paper-exp1: a harvested fruit's track, re-acquired on
-        a stray box where the fruit was, took the next fruit's box one frame later)."""
+        by more than ``max_depth_step_m`` (both known; nearer is an occluder in front). Also
+        for a track seen in the last frame: one sighting after a long coast leaves the
+        velocity covariance huge, so the next prediction's gate is still wide (paper-exp1: a
+        harvested fruit's track, re-acquired on a stray box where the fruit was, took the next
+        fruit's box one frame later)."""
         last = np.stack([self.tracks[t].last_xyah for t in tis])  # (T, 4)
         side_px = np.sqrt([self.tracks[t].max_area_px for t in tis])  # the whole fruit's box
         shift_px = np.linalg.norm(zs[None, :, :2] - last[:, None, :2], axis=2)
