@@ -50,8 +50,9 @@ class Settings(ServiceSettings):
     max_containment_growth: float = Field(
         default=1.5,
         gt=1,
-        description="Containment matching: a detection larger (area) than this times the largest "
-        "box the track ever matched is not that fruit (a hand covering it).",
+        description="A confirmed track refuses a detection larger (area) than this times the "
+        "largest box it ever matched, in every matching stage: a fruit does not grow (a hand "
+        "covering it does).",
     )
     coast_velocity_decay: float = Field(
         default=0.8,

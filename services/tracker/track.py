@@ -10,6 +10,10 @@ import numpy as np
 from services.tracker.appearance import Gallery
 from services.tracker.kalman_filter import KalmanFilter, xyah_to_xyxy, xyxy_to_xyah
 
+WHOLE_VIEW_SHARE = 0.8
+"""A box of at least this share of the largest box a track matched is a whole view of the fruit
+(not its part left visible beside an occluder)."""
+
 
 class TrackState(Enum):
     TENTATIVE = 1
@@ -53,6 +57,7 @@ class Track:
         self.depth_m = m.depth_m
         self.max_area_px = _area(m.xyxy_px)  # the largest box matched: the fruit's whole size
         self.last_xyah = xyxy_to_xyah(m.xyxy_px)  # the last box matched, not the prediction
+        self.whole_xyxy = np.asarray(m.xyxy_px, float)  # the last whole view (see update)
         self._n_init, self._max_age, self._alpha = n_init, max_age, depth_smoothing
 
     @property
@@ -82,6 +87,8 @@ class Track:
         self.score = m.score
         self.max_area_px = max(self.max_area_px, _area(m.xyxy_px))
         self.last_xyah = xyxy_to_xyah(m.xyxy_px)
+        if _area(m.xyxy_px) >= WHOLE_VIEW_SHARE * self.max_area_px:
+            self.whole_xyxy = np.asarray(m.xyxy_px, float)
         if m.depth_m is not None:
             # Depth from one box is noisy (leaf edges, fruit rim): smooth it.
             self.depth_m = (

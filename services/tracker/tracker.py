@@ -13,7 +13,8 @@
    covers shrinks to its visible part and grows back when the hand leaves; neither the
    Mahalanobis gate nor IoU accepts that jump, and Deep SORT would start a new ID for it. A
    detection larger than ``max_containment_growth`` times the largest box the track ever had
-   is not taken (a hand's box contains the fruit it covers).
+   is not taken, in any stage (a hand's box contains the fruit it covers). The track's box
+   here is its prediction or its last whole view (see ``_containment_cost``).
    (Ours, cascade and containment) A confirmed track takes a box only within
    ``max_shift_sides`` of its whole box's side from its last matched box and at most
    ``max_depth_step_m`` deeper than its depth: fruit hang still, while the Kalman covariance of
@@ -131,6 +132,7 @@ class Tracker:
         bad |= np.nan_to_num(app, nan=0.0) > self.p.max_cosine_distance
         bad |= self._depth_jumps(tis, depths)
         bad |= self._far_from_last(tis, zs, depths)
+        bad |= self._grown(tis, np.stack([dets[d].xyxy_px for d in dis]))
         return np.where(bad, INFTY_COST, cost)
 
     def _far_from_last(self, tis: Sequence[int], zs: np.ndarray, depths: np.ndarray) -> np.ndarray:
@@ -153,6 +155,13 @@ class Tracker:
             deeper = depths[None, :] - td[:, None]
         return far | (np.nan_to_num(deeper, nan=0.0) > self.p.max_depth_step_m)
 
+    def _grown(self, tis: Sequence[int], boxes: np.ndarray) -> np.ndarray:
+        """(T, N) True where the box is larger (area) than ``max_containment_growth`` times the
+        largest box the track ever matched: a fruit does not grow; a hand over it does."""
+        area = np.prod(boxes[:, 2:] - boxes[:, :2], axis=1)
+        most = np.array([self.tracks[t].max_area_px for t in tis])
+        return area[None, :] > self.p.max_containment_growth * most[:, None]
+
     def _depth_jumps(self, tis: Sequence[int], depths: np.ndarray) -> np.ndarray:
         """(T, N) True where both depths are known and the detection reads deeper than the
         track by more than the gate (nearer: an occluder in front, see ``_unoccluded``)."""
@@ -169,28 +178,24 @@ class Tracker:
         for r, ti in enumerate(tis):
             t = self.tracks[ti]
             cost[r] = INFTY_COST if t.time_since_update > 1 else 1.0 - iou(t.xyxy(), boxes)
-        return cost
+        confirmed = np.array([self.tracks[ti].confirmed for ti in tis])
+        grown = self._grown(tis, boxes) & confirmed[:, None]  # a tentative track has no size yet
+        return np.where(grown, INFTY_COST, cost)
 
     def _containment_cost(
         self, tis: Sequence[int], dis: Sequence[int], dets: Sequence[Measurement]
     ):
         boxes = np.stack([dets[d].xyxy_px for d in dis])
-        area = np.prod(boxes[:, 2:] - boxes[:, :2], axis=1)
         depths = np.array([np.nan if dets[d].depth_m is None else dets[d].depth_m for d in dis])
         cost = np.empty((len(tis), len(dis)))
         for r, ti in enumerate(tis):
             t = self.tracks[ti]
-            tb = t.xyxy()
-            lt = np.maximum(tb[:2], boxes[:, :2])
-            rb = np.minimum(tb[2:], boxes[:, 2:])
-            inter = np.prod(np.clip(rb - lt, 0, None), axis=1)
-            tarea = max(float(np.prod(tb[2:] - tb[:2])), 1e-6)
-            cost[r] = 1.0 - inter / np.maximum(np.minimum(area, tarea), 1e-6)
-            # A fruit's box shrinks behind an occluder and grows back to its whole size, never
-            # beyond: a box much larger than any this track had is something else (the hand
-            # that covers the fruit), not the fruit.
-            cost[r, area > self.p.max_containment_growth * t.max_area_px] = INFTY_COST
+            # The predicted box, or the fruit's last whole view: a box that shrank behind an
+            # occluder taught the Kalman filter to shrink it further while it coasts, and the
+            # fruit reappears on the side the occluder leaves, outside the shrunk prediction.
+            cost[r] = 1.0 - np.maximum(_contained(t.xyxy(), boxes), _contained(t.whole_xyxy, boxes))
         bad = self._depth_jumps(tis, depths) | self._far_from_last(tis, xyxy_to_xyah(boxes), depths)
+        bad |= self._grown(tis, boxes)
         return np.where(bad, INFTY_COST, cost)
 
     def _match(self, dets: Sequence[Measurement]):
@@ -222,3 +227,13 @@ class Tracker:
         )
         matched_c = {ti for ti, _ in m_c}
         return m_a + m_b + m_c, [i for i in left if i not in matched_c], ud
+
+
+def _contained(box: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    """(N,) intersection of ``box`` with each of ``boxes`` over the smaller of the two areas."""
+    lt = np.maximum(box[:2], boxes[:, :2])
+    rb = np.minimum(box[2:], boxes[:, 2:])
+    inter = np.prod(np.clip(rb - lt, 0, None), axis=1)
+    area = np.prod(boxes[:, 2:] - boxes[:, :2], axis=1)
+    own = max(float(np.prod(box[2:] - box[:2])), 1e-6)
+    return inter / np.maximum(np.minimum(area, own), 1e-6)

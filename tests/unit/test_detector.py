@@ -181,7 +181,7 @@ def test_weight_average_starts_at_the_net_and_follows_it_with_a_ramped_decay() -
     name = next(k for k, _ in net.named_parameters())
     torch.testing.assert_close(ema.model.state_dict()[name], first[name] + (1 - d))
     assert not any(p.requires_grad for p in ema.model.parameters())
-    with pytest.raises(ValueError, match="decay 1.0"):
+    with pytest.raises(ValueError, match=r"decay 1\.0"):
         WeightAverage(net, decay=1.0)
 
 

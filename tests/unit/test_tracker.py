@@ -104,6 +104,35 @@ def test_a_hand_in_front_of_a_fruit_neither_takes_nor_moves_its_depth() -> None:
     assert step(tr, [BOX_A], [0.815]) == {0: 1}
 
 
+def test_a_fruit_shrunk_behind_a_passing_hand_keeps_its_id_when_it_shows_on_the_other_side() -> (
+    None
+):
+    # The sim's occlusion suite: a hand passes right to left over a fruit. Its visible part
+    # shrinks towards the left edge (the Kalman filter learns a shrinking box and, coasting,
+    # shrinks it to a few pixels), then the fruit shows again from the right, outside that
+    # shrunk prediction. Its last whole view still contains the new box: the same fruit.
+    tr = Tracker(TrackerParams(n_init=3))
+    whole = np.array([500.0, 150.0, 572.0, 214.0])
+    for _ in range(5):
+        assert step(tr, [whole]) == {0: 1}
+    for right in (560.0, 545.0, 530.0, 518.0):  # the hand covers it from the right
+        assert step(tr, [np.array([500.0, 155.0, right, 205.0])]) == {0: 1}
+    for _ in range(5):
+        step(tr, [])
+    assert step(tr, [np.array([520.0, 150.0, 572.0, 212.0])]) == {0: 1}
+
+
+def test_a_box_much_larger_than_the_fruit_ever_was_is_not_the_fruit_in_any_stage() -> None:
+    # A hand sweeping over a fruit: its box (1.9x the fruit's area, about the same centre) is
+    # inside the Kalman gate of the fruit's track; the fruit does not grow, so it is not it.
+    tr = Tracker(TrackerParams(n_init=3))
+    for _ in range(5):
+        step(tr, [BOX_A])
+    hand = np.array([92.0, 92.0, 147.0, 147.0])
+    assert step(tr, [hand]) == {0: 2}
+    assert step(tr, [BOX_A]) == {0: 1}
+
+
 def test_min_cost_matching_leaves_costly_pairs_unmatched() -> None:
     cost = np.array([[0.1, 0.9], [0.8, 0.95]])
     matches, ut, ud = min_cost_matching(lambda t, d: cost[np.ix_(t, d)], 0.5, [0, 1], [0, 1])
