@@ -299,6 +299,13 @@ class Settings(ServiceSettings):
         ge=0,
         description="At the ready pose with no fruit left for this long: the run ends, s.",
     )
+    hidden_wait_s: float = Field(
+        default=20.0,
+        ge=0,
+        description="The run does not end while a fruit never settled was last seen less than "
+        "this long ago: leaves, a person or the arms hide a fruit for longer than the scene "
+        "keeps it listed (lost_after_frames), and it shows again, s. 0: end at once.",
+    )
     max_run_s: float = Field(
         default=600.0, gt=0, description="The run ends after this much sim time whatever, s."
     )

@@ -63,6 +63,7 @@ class FruitRecord:
     planned_whole: bool = False  # ``planned`` comes from a whole view (no side cut, fresh)
     scene_mark_ok: bool = True  # False: its ID was another fruit's, whose scene mark it carries
     reach: tuple[ReachVerdict, ReachVerdict] | None = None  # harvest pose, pre-pose
+    last_seen_ns: int | None = None  # the last scene stamp with a fresh sighting of any of its IDs
 
     @property
     def finished(self) -> bool:
@@ -107,6 +108,8 @@ class FruitBook:
                 self._switch(rec, fid)
             if fid == rec.fruit_id:
                 self._observe(rec, f, in_dish)
+            if f.frames_unseen == 0 and not in_dish(f):
+                rec.last_seen_ns = scene.header.stamp_ns
         for key in sorted(self.records):
             self.records[key].in_scene = key in present
 
@@ -195,6 +198,18 @@ class FruitBook:
         ]
         fresh = [r for r in ok if not r.deferred]
         return fresh or ok
+
+    def hidden(self, now_ns: int, within_s: float) -> list[FruitRecord]:
+        """Fruit still to do that the scene no longer shows fresh (forgotten, or unseen for
+        long) but that were seen on the tree within ``within_s``: hidden, not gone."""
+        return [
+            r
+            for _, r in sorted(self.records.items())
+            if not r.finished
+            and not r.in_basket
+            and r.last_seen_ns is not None
+            and now_ns - r.last_seen_ns < within_s * 1e9
+        ]
 
     def ignore_ids(self, rec: FruitRecord | None) -> tuple[int, ...]:
         """IDs the controller need not avoid: the target's (all of them) while the tools touch

@@ -63,6 +63,7 @@ def _record(r: FruitRecord) -> dict[str, Any]:
         "cuts": r.cuts,
         "losses": r.losses,
         "scene_mark_ok": r.scene_mark_ok,
+        "last_seen_ns": r.last_seen_ns,
     }
 
 
@@ -86,6 +87,7 @@ def _unrecord(d: dict[str, Any]) -> FruitRecord:
         losses=d["losses"],
         planned_whole=d["planned_whole"],
         scene_mark_ok=d.get("scene_mark_ok", True),
+        last_seen_ns=d.get("last_seen_ns"),
     )
 
 

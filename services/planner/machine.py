@@ -19,7 +19,8 @@
 * **leave**: back to the pre-pose of that fruit, then select. After a stall, with
   ``retrace_after_stall``: back along the attempt's joint path instead (retrace.py).
 * **home**: nothing to do: the ready pose; the run ends after ``finish_after_s`` there with no
-  candidate (or at ``max_run_s``).
+  candidate and no fruit still to do that was seen within ``hidden_wait_s`` (hidden by leaves,
+  a person or the arms for longer than the scene lists it), or at ``max_run_s``.
 
 Progress: each phase keeps the best task error seen on statuses of its own targets; no
 improvement by ``progress_min_m`` for ``no_progress_s`` is "stuck". Statuses of older targets
@@ -442,6 +443,7 @@ class Machine:
         if (
             self.home_since_ns is not None
             and now - self.home_since_ns >= self.s.finish_after_s * NS
+            and not self._hidden(now)
         ):
             self._end_run(now, "no reachable fruit left")
 
@@ -539,6 +541,11 @@ class Machine:
         return rec, f"planned order ({len(ok)} fruit): " + " → ".join(
             str(ok[i].fruit_id) for i in order
         )
+
+    def _hidden(self, now: int) -> list[FruitRecord]:
+        """Fruit to do that were seen on the tree within ``hidden_wait_s`` and are not shown now
+        (leaves, a person, the arms in front): the run waits for them (ghosts aside)."""
+        return [r for r in self.book.hidden(now, self.s.hidden_wait_s) if not self._ghost(r)]
 
     def _ghost(self, rec: FruitRecord) -> bool:
         """A record not seen now that overlaps a fruit known to be off the tree (harvested,

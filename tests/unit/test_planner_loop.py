@@ -107,6 +107,28 @@ def test_a_fruit_that_disappears_during_the_approach_is_lost_then_the_next_taken
     assert out == {1: "lost", 2: "harvested"}
 
 
+def test_a_fruit_hidden_for_longer_than_the_scene_lists_it_is_waited_for_and_harvested(
+    tmp_path: Path,
+) -> None:
+    # Fruit 2 is hidden (swaying leaves, a person) from 1 s to 14 s: the scene forgets it after
+    # 100 frames, while fruit 1 is harvested. The run must not end before it shows again.
+    def hide_second(scene: TruthScene, truth: Any) -> None:
+        t = truth.header.stamp_ns
+        if 1_000_000_000 <= t < 14_000_000_000:
+            scene.hidden.add(2)
+        else:
+            scene.hidden.discard(2)
+
+    r = run_harvest(
+        lab_scenario(tmp_path, [A, B]), scene=TruthScene(on_frame=hide_second), max_s=40
+    )
+    check_loop_invariants(r)
+    out = {f.fruit_id: f.outcome for f in r.summary().fruits}
+    assert out == {1: "harvested", 2: "harvested"}
+    (finished,) = r.events("run_finished")
+    assert finished.header.stamp_ns > 14_000_000_000
+
+
 def test_a_tracker_id_switch_mid_approach_keeps_the_same_fruit(tmp_path: Path) -> None:
     def switch(scene: TruthScene, truth: Any) -> None:
         if truth.header.stamp_ns >= 1_400_000_000:
