@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -17,6 +18,7 @@ def add_parsers(bsub: argparse._SubParsersAction) -> None:
         "ms per frame, after a warm-up.",
     )
     b.add_argument("--backend", choices=["net", "hsv"], default="net")
+    b.add_argument("--weights", type=Path, help="OrangeNet weights (default: the committed ones)")
     b.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     b.add_argument("--frames", type=int, default=200)
     b.add_argument("--json", action="store_true")
@@ -47,7 +49,10 @@ def cmd_bench_detector(args: argparse.Namespace) -> int:
     from services.runtime.settings import load_settings
     from services.testkit.scene2d import Scene2D
 
-    settings = load_settings(Settings, {"backend": args.backend, "torch_threads": args.threads})
+    layer: dict[str, object] = {"backend": args.backend, "torch_threads": args.threads}
+    if args.weights:
+        layer["weights_path"] = str(args.weights.resolve())
+    settings = load_settings(Settings, layer)
     core = DetectorCore(settings)  # type: ignore[arg-type]
     scene = Scene2D(seed=0, n_fruit=12, sweep=(0, 60), sway=True)
     frames = [scene.frame(k).frame for k in range(20)]

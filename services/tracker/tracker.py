@@ -65,6 +65,11 @@ class TrackerParams:
     max_depth_step_m: float = 0.1
 
 
+RECENT_FRAMES = 15
+"""A confirmed track lost for at most this many frames (1 s at 15 Hz) has first claim on the boxes
+inside its last whole view (see ``Tracker._claimed_by_a_fresher_track``)."""
+
+
 class Tracker:
     """``predict()`` then ``update(measurements)`` once per frame, also with no measurements."""
 
@@ -121,10 +126,14 @@ class Tracker:
         feats = [dets[d].feature for d in dis]
         depths = np.array([np.nan if dets[d].depth_m is None else dets[d].depth_m for d in dis])
         w = self.p.appearance_weight
-        mahas = self.kf.gating_distances(
-            np.stack([self.tracks[ti].mean for ti in tis]),
-            np.stack([self.tracks[ti].cov for ti in tis]),
-            zs,
+        means = np.stack([self.tracks[ti].mean for ti in tis])
+        covs = np.stack([self.tracks[ti].cov for ti in tis])
+        # Also gated at the fruit's last whole view: a box shrinking behind an occluder drags
+        # the prediction away, and the fruit shows again whole where it was.
+        whole = means.copy()
+        whole[:, :4] = xyxy_to_xyah(np.stack([self.tracks[ti].whole_xyxy for ti in tis]))
+        mahas = np.minimum(
+            self.kf.gating_distances(means, covs, zs), self.kf.gating_distances(whole, covs, zs)
         )
         app = appearance_distances([self.tracks[ti].gallery for ti in tis], feats)
         cost = np.where(np.isnan(app), mahas / gate, w * app + (1 - w) * mahas / gate)
@@ -132,8 +141,25 @@ class Tracker:
         bad |= np.nan_to_num(app, nan=0.0) > self.p.max_cosine_distance
         bad |= self._depth_jumps(tis, depths)
         bad |= self._far_from_last(tis, zs, depths)
-        bad |= self._grown(tis, np.stack([dets[d].xyxy_px for d in dis]))
+        boxes = np.stack([dets[d].xyxy_px for d in dis])
+        bad |= self._grown(tis, boxes)
+        bad |= self._claimed_by_a_fresher_track(tis, boxes)
         return np.where(bad, INFTY_COST, cost)
+
+    def _claimed_by_a_fresher_track(self, tis: Sequence[int], boxes: np.ndarray) -> np.ndarray:
+        """(T, N) True where a track lost for more than ``RECENT_FRAMES`` would take a box that
+        the last whole view of a confirmed track seen within them contains: that fruit's box,
+        left to the containment stage. Its own gates may fail while it shows again (a hand
+        still half over it spoils its appearance), and a long-lost track (the hand's own,
+        coasting where it passed) would otherwise take it in the cascade and keep it."""
+        recent = [
+            t for t in self.tracks if t.confirmed and 0 < t.time_since_update <= RECENT_FRAMES
+        ]
+        claimed = np.zeros(len(boxes), bool)
+        for t in recent:
+            claimed |= _contained(t.whole_xyxy, boxes) >= self.p.min_containment
+        old = np.array([self.tracks[ti].time_since_update > RECENT_FRAMES for ti in tis])
+        return old[:, None] & claimed[None, :]
 
     def _far_from_last(self, tis: Sequence[int], zs: np.ndarray, depths: np.ndarray) -> np.ndarray:
         """(T, N) True where the detection (xyah rows ``zs``) lies farther from the track's last

@@ -133,6 +133,30 @@ def test_a_box_much_larger_than_the_fruit_ever_was_is_not_the_fruit_in_any_stage
     assert step(tr, [BOX_A]) == {0: 1}
 
 
+def test_a_fruit_showing_again_is_not_taken_by_the_long_lost_track_of_the_hand_beside_it() -> None:
+    # A hand (its own confirmed track) passed the fruit and was lost beside it 20 frames ago.
+    # The fruit, hidden for 4 frames, shows again with the hand still half over it: its box
+    # looks like the hand (its own appearance gate refuses it), and the hand's long-lost track
+    # would take it in the cascade. The fruit's whole view contains the box: the fruit's.
+    from services.tracker.appearance import DESCRIPTOR_DIM
+
+    fruit_f, hand_f = np.zeros(DESCRIPTOR_DIM), np.zeros(DESCRIPTOR_DIM)
+    fruit_f[0] = hand_f[1] = 1.0
+    hand = np.array([130.0, 60.0, 210.0, 140.0])
+    tr = Tracker(TrackerParams(n_init=3))
+    for _ in range(5):
+        tr.predict()
+        tr.update([m(BOX_A, feature=fruit_f), m(hand, feature=hand_f)])
+    for _ in range(20):
+        tr.predict()
+        tr.update([m(BOX_A, feature=fruit_f)])
+    for _ in range(4):
+        tr.predict()
+        tr.update([])
+    tr.predict()
+    assert tr.update([m(BOX_A, feature=hand_f)]) == {0: 1}
+
+
 def test_min_cost_matching_leaves_costly_pairs_unmatched() -> None:
     cost = np.array([[0.1, 0.9], [0.8, 0.95]])
     matches, ut, ud = min_cost_matching(lambda t, d: cost[np.ix_(t, d)], 0.5, [0, 1], [0, 1])
