@@ -77,6 +77,11 @@ def shape_of(f: Fruit) -> FruitShape:
     return FruitShape(np.array(f.position_world_m, float), f.semi_axis_h_m, f.semi_axis_v_m)
 
 
+InDish = Callable[..., bool]
+"""``in_dish(fruit, resting=False)``: the sighting is in our dish. ``resting``: the fruit is known
+to be in the basket (harvested), so a view of its top above the rim counts too."""
+
+
 @dataclass
 class FruitBook:
     """Records by key, the ID map, and the dish poses at recent camera stamps."""
@@ -90,7 +95,7 @@ class FruitBook:
     moved: list[tuple[int, float]] = field(default_factory=list)  # (key, metres)
     reborn: list[tuple[int, int, int]] = field(default_factory=list)  # (old key, new key, ID)
 
-    def update(self, scene: SceneState, in_dish: Callable[[Fruit], bool]) -> None:
+    def update(self, scene: SceneState, in_dish: InDish) -> None:
         """Take one scene state: new IDs, switches, positions, what is in the scene now."""
         now = {f.fruit_id: f for f in scene.fruits}
         present: set[int] = set()
@@ -132,13 +137,13 @@ class FruitBook:
         self.id_to_key[f.fruit_id] = key
         return key
 
-    def _reused(self, rec: FruitRecord, f: Fruit, in_dish: Callable[[Fruit], bool]) -> bool:
+    def _reused(self, rec: FruitRecord, f: Fruit, in_dish: InDish) -> bool:
         """``f`` (an ID of ``rec``) is fresh and far from ``rec``'s fruit, which is finished or
         has a newer ID, and not in our dish (a harvested fruit is seen there): the tracker gave
         the ID to another fruit."""
         if f.frames_unseen > 0 or not (rec.finished or f.fruit_id != rec.fruit_id):
             return False
-        if in_dish(f):
+        if in_dish(f, rec.outcome == "harvested"):
             return False
         p = np.array(f.position_world_m, float)
         c = rec.planned.centre_world_m
@@ -164,7 +169,7 @@ class FruitBook:
         self.switches.append((rec.key, rec.fruit_id, new_id))
         rec.fruit_id = new_id
 
-    def _observe(self, rec: FruitRecord, f: Fruit, in_dish: Callable[[Fruit], bool]) -> None:
+    def _observe(self, rec: FruitRecord, f: Fruit, in_dish: InDish) -> None:
         rec.seen = f
         if rec.finished or rec.frozen:
             return
@@ -231,13 +236,15 @@ def _whole(f: Fruit) -> bool:
     return not f.flags and f.frames_unseen == 0
 
 
-def inside_dish(p_world_m: np.ndarray, dish: DishPose, margin_m: float) -> bool:
+def inside_dish(
+    p_world_m: np.ndarray, dish: DishPose, margin_m: float, above_rim_m: float | None = None
+) -> bool:
     """A fruit centre inside the dish: within its radius, between the floor and the rim top
-    (+ margin). A fruit resting in the dish has its centre d_v (≤ 5 cm) above the floor; the
-    fruit hanging over the dish at the harvest pose has it rim + clearance + d_v (≥ 8.5 cm)
-    above, so the target is never taken for a fruit in the basket."""
+    (+ margin, or + ``above_rim_m``). A fruit resting in the dish has its centre d_v (≤ 5 cm)
+    above the floor; the fruit hanging over the dish at the harvest pose has it rim +
+    clearance + d_v (≥ 8.5 cm) above, so the target is never taken for a fruit in the basket."""
     rel = np.asarray(p_world_m, float) - dish.centre_world_m
     h = float(rel @ dish.normal_world)
     radial = float(np.linalg.norm(rel - h * dish.normal_world))
-    top = TOOLS.basket_rim_height_m + margin_m
+    top = TOOLS.basket_rim_height_m + (margin_m if above_rim_m is None else above_rim_m)
     return radial <= TOOLS.basket_radius_m + margin_m and -margin_m <= h <= top

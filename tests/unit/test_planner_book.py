@@ -33,7 +33,7 @@ def scene(*fruits: Fruit, seq: int = 0) -> SceneState:
     )
 
 
-def never(_: Fruit) -> bool:
+def never(_: Fruit, resting: bool = False) -> bool:
     return False
 
 
@@ -105,6 +105,27 @@ def test_inside_dish_tells_a_resting_fruit_from_the_one_hanging_over_the_dish() 
     assert not inside_dish(np.array([0.75, 0.0, 1.04]), dish, 0.02)  # beside the dish
 
 
+def test_a_fruit_in_the_basket_seen_by_its_top_above_the_rim_is_still_in_the_dish() -> None:
+    # paper-exp1 seed 13: the scene put a harvested fruit, of which only the top showed above
+    # the rim, 7.7 cm above the dish floor (the rim at 4.5 cm); the planner took it for another
+    # fruit, sent the tools 0.435 m from the camera and caught the arms in the branches.
+    dish = DishPose(np.array([0.432, -0.083, 1.272]), np.array([0.0, 0.0, 1.0]))
+    seen = np.array([0.443, -0.051, 1.349])
+    assert not inside_dish(seen, dish, 0.02)  # as a fruit hanging over it would be judged
+    assert inside_dish(seen, dish, 0.02, above_rim_m=0.05)  # as a fruit known to be in it
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    b.update(scene(fruit(1, (0.529, -0.05, 1.469))), never)
+    b.records[1].outcome = "harvested"
+    asked: list[bool] = []
+
+    def in_dish(f: Fruit, resting: bool = False) -> bool:
+        asked.append(resting)
+        return resting and inside_dish(np.array(f.position_world_m), dish, 0.02, 0.05)
+
+    b.update(scene(fruit(1, tuple(seen))), in_dish)  # type: ignore[arg-type]
+    assert sorted(b.records) == [1] and True in asked and b.candidates(45) == []
+
+
 def test_a_much_smaller_unflagged_view_does_not_move_a_target_planned_from_a_whole_one() -> None:
     b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
     b.update(scene(fruit(3, (0.7, 0.05, 1.25))), never)  # whole, d_h 4 cm
@@ -153,6 +174,6 @@ def test_a_harvested_fruit_seen_in_the_dish_or_a_dropped_one_seen_fallen_is_not_
     b.records[2].outcome, b.records[3].outcome = "harvested", "dropped"
     b.update(
         scene(fruit(2, (0.5, -0.1, 0.9)), fruit(3, (0.7, 0.1, 1.0))),
-        lambda f: f.fruit_id == 2,
+        lambda f, resting=False: f.fruit_id == 2,
     )
     assert sorted(b.records) == [2, 3] and b.candidates(45) == []

@@ -46,7 +46,7 @@ def core_with(order: str, *fruits: Fruit) -> PlannerCore:
             trunk=Trunk(found=False),
             obstacles=Obstacles(),
         ),
-        lambda _f: False,
+        lambda _f, resting=False: False,
     )
     for r in core.book.records.values():
         r.reach = (OK, OK)
@@ -146,7 +146,7 @@ def test_a_stale_second_track_of_a_harvested_fruit_is_no_neighbour_nor_candidate
             trunk=Trunk(found=False),
             obstacles=Obstacles(),
         ),
-        lambda _f: False,
+        lambda _f, resting=False: False,
     )
     recs = core.book.records
     assert sorted(recs) == [1, 3, 7, 8]
