@@ -87,8 +87,11 @@ class Track:
         self.score = m.score
         self.max_area_px = max(self.max_area_px, _area(m.xyxy_px))
         self.last_xyah = xyxy_to_xyah(m.xyxy_px)
-        if _area(m.xyxy_px) >= WHOLE_VIEW_SHARE * self.max_area_px:
-            self.whole_xyxy = np.asarray(m.xyxy_px, float)
+        box = np.asarray(m.xyxy_px, float)
+        if _area(box) >= WHOLE_VIEW_SHARE * self.max_area_px:
+            self.whole_xyxy = box
+        else:  # a part of the fruit: it lies inside the whole fruit, wherever that went
+            self.whole_xyxy = _shifted_over(self.whole_xyxy, box)
         if m.depth_m is not None:
             # Depth from one box is noisy (leaf edges, fruit rim): smooth it.
             self.depth_m = (
@@ -108,3 +111,18 @@ class Track:
 
 def _area(xyxy: np.ndarray) -> float:
     return float(max(xyxy[2] - xyxy[0], 0.0) * max(xyxy[3] - xyxy[1], 0.0))
+
+
+def _shifted_over(whole: np.ndarray, part: np.ndarray) -> np.ndarray:
+    """The whole view moved the least that puts the part of the fruit seen inside it (centred
+    on the part along an axis where the part is the longer): a part seen outside the whole view
+    means the fruit moved (a hand pushed it) while a leaf or the hand hides some of it."""
+    out = whole.copy()
+    for lo, hi in ((0, 2), (1, 3)):
+        if part[hi] - part[lo] >= whole[hi] - whole[lo]:
+            shift = (part[lo] + part[hi] - whole[lo] - whole[hi]) / 2
+        else:
+            shift = min(part[lo] - whole[lo], 0.0) + max(part[hi] - whole[hi], 0.0)
+        out[lo] += shift
+        out[hi] += shift
+    return out

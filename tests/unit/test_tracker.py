@@ -157,6 +157,36 @@ def test_a_fruit_showing_again_is_not_taken_by_the_long_lost_track_of_the_hand_b
     assert tr.update([m(BOX_A, feature=hand_f)]) == {0: 1}
 
 
+def test_a_fruit_moved_while_partly_hidden_is_still_claimed_where_it_went() -> None:
+    # The sim's occlusion suite: a hand pushes a fruit 4 cm; where it goes a leaf hides a
+    # quarter of it, so no box of it is a whole view again. Later the hand passes over it and
+    # it shows again with the hand half over it (its appearance gate refuses the box), beside
+    # the hand's long-lost track. Its whole view must have followed it to claim the box.
+    from services.tracker.appearance import DESCRIPTOR_DIM
+
+    fruit_f, hand_f = np.zeros(DESCRIPTOR_DIM), np.zeros(DESCRIPTOR_DIM)
+    fruit_f[0] = hand_f[1] = 1.0
+    hand = np.array([40.0, 60.0, 120.0, 140.0])
+    tr = Tracker(TrackerParams(n_init=3))
+    whole = np.array([140.0, 110.0, 220.0, 185.0])  # 80 x 75 px
+    for _ in range(5):
+        tr.predict()
+        tr.update([m(whole, feature=fruit_f), m(hand, feature=hand_f)])
+    part = np.array([140.0, 110.0, 198.0, 184.0])  # 58 x 74 px: 0.72 of its area
+    for dx in range(0, 45, 3):  # pushed left, a leaf over its right quarter
+        tr.predict()
+        assert tr.update([m(part - [dx, dx / 2, dx, dx / 2], feature=fruit_f)]) == {0: 1}
+    there = part - [42.0, 21.0, 42.0, 21.0]
+    for _ in range(20):
+        tr.predict()
+        assert tr.update([m(there, feature=fruit_f)]) == {0: 1}
+    for _ in range(4):
+        tr.predict()
+        tr.update([])
+    tr.predict()
+    assert tr.update([m(there, feature=hand_f)]) == {0: 1}
+
+
 def test_min_cost_matching_leaves_costly_pairs_unmatched() -> None:
     cost = np.array([[0.1, 0.9], [0.8, 0.95]])
     matches, ut, ud = min_cost_matching(lambda t, d: cost[np.ix_(t, d)], 0.5, [0, 1], [0, 1])
