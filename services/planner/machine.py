@@ -171,20 +171,38 @@ class Machine:
     def goal(self) -> Goal:
         rec = self.target
         if self.phase in ("idle", "home", "done") or rec is None:
-            return Goal(self.phase, self._ready(), ignore=self.book.ignore_ids(None))
+            return Goal(self.phase, self._ready(), ignore=self._ignore(None))
         touching = self.phase in ("harvest", "cut", "leave")
         if self.verify is not None and self.looking:  # at the pre-pose: on to look from afar
-            return Goal(self.phase, self._ready(), rec.fruit_id, self.book.ignore_ids(None))
+            return Goal(self.phase, self._ready(), rec.fruit_id, self._ignore(None))
         if self.retrace is not None:
-            ignore = self.book.ignore_ids(rec if self.retrace_touching else None)
+            ignore = self._ignore(rec if self.retrace_touching else None)
             return Goal(self.phase, None, rec.fruit_id, ignore, self.retrace.goal)
         poses = pre_pose if self.phase in ("approach", "leave") else harvest_pose
         return Goal(
             self.phase,
             poses(rec.planned, self.pose_settings),
             rec.fruit_id,
-            self.book.ignore_ids(rec if touching else None),
+            self._ignore(rec if touching else None),
         )
+
+    def _ignore(self, touching: FruitRecord | None) -> tuple[int, ...]:
+        """Fruit IDs the controller need not avoid: the book's (the target's while the tools
+        touch it, the basket's, those off the tree), the ghosts of fruit off the tree, and,
+        while the tools touch the target, any other record of it (one fruit seen as two
+        tracks: paper-exp1 seed 12, a second track on the lower half of the target, 5 cm
+        under its centre, held the dish 9 cm short of its place until the harvest gave up)."""
+        ids = set(self.book.ignore_ids(touching))
+        for r in self.book.detected():
+            if r is touching:
+                continue
+            if self._ghost(r) or (
+                touching is not None
+                and r.outcome not in ("harvested", "dropped")
+                and same_fruit(r.planned, touching.planned)
+            ):
+                ids.update(r.ids)
+        return tuple(sorted(ids))
 
     # ---- phases ------------------------------------------------------------------------------
     def _idle(self, now: int, st: ControlStatus, basket: int | None) -> None:

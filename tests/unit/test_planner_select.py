@@ -156,3 +156,37 @@ def test_a_stale_second_track_of_a_harvested_fruit_is_no_neighbour_nor_candidate
     assert select(core) == 1  # not blocked by the stale track 7, which is not selected either
     ps = core.machine.pose_settings
     assert blockers(recs[1].planned, [recs[7].planned], ps, 0.0) == [0]  # where A's dish goes
+
+
+def test_the_controller_is_not_told_to_avoid_a_second_track_of_the_target_nor_a_ghost() -> None:
+    # paper-exp1 seed 12: track 11, on the lower half of the target (track 1), is estimated
+    # 5 cm under its centre (too far for the book to merge them), where the dish goes; the
+    # controller kept the dish from it, 9 cm short of its place. Track 7 is a stale second
+    # track of B (harvested, by its track 8) listed where B hung.
+    under_a = (A[0], A[1], A[2] - 0.05)
+    b_again = (B[0], B[1] + 0.05, B[2])
+    core = core_with(
+        "nearest", fruit(1, A, 0.5), fruit(11, under_a, 0.5), fruit(8, b_again, 0.6)
+    )
+    core.book.update(
+        SceneState(
+            header=Header(stamp_ns=1, seq=1, source="scene"),
+            fruits=(
+                fruit(1, A, 0.5),
+                fruit(11, under_a, 0.5),
+                fruit(7, B, 0.6).model_copy(update={"frames_unseen": 20}),
+                fruit(8, b_again, 0.6),
+            ),
+            trunk=Trunk(found=False),
+            obstacles=Obstacles(),
+        ),
+        lambda _f, resting=False: False,
+    )
+    assert sorted(core.book.records) == [1, 7, 8, 11]
+    harvest(core, 8)
+    m = core.machine
+    m.target = core.book.records[1]
+    m.phase = "approach"
+    assert m.goal().ignore == (7, 8)  # the ghost and the harvested fruit: never obstacles
+    m.phase = "harvest"
+    assert m.goal().ignore == (1, 7, 8, 11)  # the tools touch the target: all of its tracks
