@@ -165,9 +165,7 @@ def test_the_controller_is_not_told_to_avoid_a_second_track_of_the_target_nor_a_
     # track of B (harvested, by its track 8) listed where B hung.
     under_a = (A[0], A[1], A[2] - 0.05)
     b_again = (B[0], B[1] + 0.05, B[2])
-    core = core_with(
-        "nearest", fruit(1, A, 0.5), fruit(11, under_a, 0.5), fruit(8, b_again, 0.6)
-    )
+    core = core_with("nearest", fruit(1, A, 0.5), fruit(11, under_a, 0.5), fruit(8, b_again, 0.6))
     core.book.update(
         SceneState(
             header=Header(stamp_ns=1, seq=1, source="scene"),
