@@ -68,6 +68,14 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         help="decay of the weight average that is validated and shipped (0: off)",
     )
     d.add_argument("--threads", type=int, default=2, help="torch CPU threads (ignored on GPU)")
+    d.add_argument(
+        "--workers",
+        type=int,
+        default=0,
+        help="processes building the batches (0: in the training process, the committed "
+        "recipe's draws; N > 0: each batch seeded by (seed, epoch, batch), the same for any N; "
+        "a GPU needs many)",
+    )
     d.add_argument("--resume", action="store_true", help="continue from OUT_DIR/last.pt")
     d.set_defaults(func=cmd_train_detector)
 
@@ -94,6 +102,7 @@ def cmd_train_detector(args: argparse.Namespace) -> int:
         precision=args.precision,
         ema_decay=args.ema_decay,
         threads=args.threads,
+        workers=args.workers,
         synth_cache=str(args.synth_cache),
     )
     print(f"training on {pick_device()}; checkpoints in {cfg.out_dir}", file=sys.stderr)

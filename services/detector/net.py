@@ -139,7 +139,7 @@ def fused_for_inference(net: OrangeNet) -> OrangeNet:
         ):
             m[0] = torch.nn.utils.fusion.fuse_conv_bn_eval(m[0], m[1])
             m[1] = nn.Identity()
-    return out.to(memory_format=torch.channels_last)
+    return out.to(memory_format=torch.channels_last)  # type: ignore[call-overload]
 
 
 def decode(

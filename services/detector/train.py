@@ -12,13 +12,15 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
+import cv2
 import numpy as np
 import torch
+from torch.utils.data import DataLoader, Dataset
 
 from services.detector.augment import mosaic, photometric, random_placement
 from services.detector.data import DatasetError, Sample, load_dataset
@@ -118,6 +120,10 @@ class TrainConfig:
     precision: str = "bf16"
     ema_decay: float = 0.998  # 0 turns the weight average off (the last iterate is validated)
     synth_cache: str = "runs/synth"
+    # Processes building the batches (sampling + augmentation). 0: in the training process, one
+    # generator per epoch (the committed recipe). N > 0: a DataLoader of N workers, each batch
+    # from its own generator (seed, epoch, batch): the same batches for any N (a GPU needs many).
+    workers: int = 0
     net: dict[str, Any] = field(default_factory=lambda: NetConfig().to_dict())
 
 
@@ -196,6 +202,54 @@ def make_batch(
     )
 
 
+class _BatchSet(Dataset[tuple[torch.Tensor, ...]]):
+    """Batch number ``it`` of the run (all epochs), built from the generator of (seed, epoch,
+    index in the epoch): what a batch holds depends on neither the worker nor the resume point."""
+
+    def __init__(self, pool: _Pool, cfg: TrainConfig, ncfg: NetConfig) -> None:
+        self.pool, self.cfg, self.ncfg = pool, cfg, ncfg
+
+    def __len__(self) -> int:
+        return self.cfg.epochs * self.cfg.iters_per_epoch
+
+    def __getitem__(self, it: int) -> tuple[torch.Tensor, ...]:
+        epoch, i = divmod(it, self.cfg.iters_per_epoch)
+        rng = np.random.default_rng([self.cfg.seed, epoch, i])
+        return make_batch(self.pool, self.cfg, self.ncfg, rng)
+
+
+def _worker_init(_: int) -> None:
+    cv2.setNumThreads(1)  # the workers are the parallelism; OpenCV's own threads oversubscribe
+
+
+def batches(
+    pool: _Pool, cfg: TrainConfig, ncfg: NetConfig, start_epoch: int, pin_memory: bool = False
+) -> Iterator[tuple[torch.Tensor, ...]]:
+    """The training batches from ``start_epoch`` to the end, in order (see TrainConfig.workers)."""
+    if cfg.workers < 0:
+        raise ValueError(f"workers {cfg.workers}: must be >= 0")
+    if cfg.workers == 0:
+        for epoch in range(start_epoch, cfg.epochs):
+            # One generator per epoch: a resumed run draws what the uninterrupted one would.
+            rng = np.random.default_rng([cfg.seed, epoch])
+            for _ in range(cfg.iters_per_epoch):
+                yield make_batch(pool, cfg, ncfg, rng)
+        return
+    data = _BatchSet(pool, cfg, ncfg)
+    yield from DataLoader(
+        data,
+        batch_size=None,  # an item is a whole batch
+        sampler=range(start_epoch * cfg.iters_per_epoch, len(data)),
+        num_workers=cfg.workers,
+        worker_init_fn=_worker_init,
+        pin_memory=pin_memory,
+        prefetch_factor=4,
+        # Fresh interpreters: forking after OpenCV/torch thread pools ran is unsafe (forked
+        # workers hung now and then in the unit test); costs a few seconds once per run.
+        multiprocessing_context="spawn",
+    )
+
+
 def lr_at(cfg: TrainConfig, it: int) -> float:
     total = cfg.epochs * cfg.iters_per_epoch
     if it < cfg.warmup_iters:
@@ -234,7 +288,8 @@ def train(
     net = OrangeNet(ncfg).to(device)
     opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     ema = WeightAverage(net, cfg.ema_decay) if cfg.ema_decay > 0 else None
-    shipped = ema.model if ema else net  # what is validated, selected and saved
+    # What is validated, selected and saved (the average is a copy of the net: an OrangeNet).
+    shipped = cast(OrangeNet, ema.model) if ema else net
     out = Path(cfg.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     cfg.train = resolve(cfg.train, None, Path(cfg.synth_cache), log)
@@ -251,18 +306,16 @@ def train(
             ema.load_state_dict(ck["ema"])
         start_epoch, best, history = ck["epoch"] + 1, ck["best"], ck["history"]
         log(f"resumed from {out / 'last.pt'} at epoch {start_epoch}")
-    pool = _Pool(cfg.train)
+    stream = batches(_Pool(cfg.train), cfg, ncfg, start_epoch, pin_memory=device.type == "cuda")
     net.train()
     for epoch in range(start_epoch, cfg.epochs):
-        # One generator per epoch: a resumed run draws exactly what the uninterrupted one would.
-        rng = np.random.default_rng([cfg.seed, epoch])
         torch.manual_seed(cfg.seed * 100_003 + epoch)
         t0, losses = time.perf_counter(), []
         for i in range(cfg.iters_per_epoch):
             it = epoch * cfg.iters_per_epoch + i
             for g in opt.param_groups:
                 g["lr"] = lr_at(cfg, it)
-            x, heat, box_t, weight = (t.to(device) for t in make_batch(pool, cfg, ncfg, rng))
+            x, heat, box_t, weight = (t.to(device, non_blocking=True) for t in next(stream))
             with autocast(cfg, device):
                 hm, ltrb = net(x)
             # The losses in fp32: focal terms of tiny probabilities lose everything in bf16.
@@ -294,6 +347,7 @@ def train(
                 save_weights(out / "best.pt", shipped, {"epoch": epoch, "val": metrics})
         history.append(row)
         log(json.dumps(row))
+        # Written whole, then renamed: a run killed while saving keeps the previous last.pt.
         torch.save(
             {
                 "model": net.state_dict(),
@@ -303,8 +357,9 @@ def train(
                 "best": best,
                 "history": history,
             },
-            out / "last.pt",
+            out / "last.pt.part",
         )
+        (out / "last.pt.part").replace(out / "last.pt")
     return {"best": best, "history": history}
 
 

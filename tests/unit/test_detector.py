@@ -211,3 +211,51 @@ def test_an_unknown_training_precision_is_refused_by_name() -> None:
     cfg = TrainConfig(train=[], val=[], out_dir="x", weights_out="x.pt", precision="fp8")
     with pytest.raises(ValueError, match="precision 'fp8'"):
         autocast(cfg, torch.device("cpu"))
+
+
+def test_parallel_batches_are_the_same_for_any_worker_count_and_resume_point(
+    tmp_path: Path,
+) -> None:
+    from services.detector.train import DataSpec, TrainConfig, _BatchSet, _Pool, batches, train
+
+    train_set = write_dataset(tmp_path, 3, 30)
+    specs = [DataSpec(str(train_set)), DataSpec("scripted", weight=0.5)]
+    cfg = TrainConfig(
+        train=specs, val=[], out_dir="x", weights_out="x.pt", epochs=2, iters_per_epoch=3, batch=2
+    )
+    pool = _Pool(specs)
+
+    def drawn(workers: int, start_epoch: int = 0) -> list[tuple[torch.Tensor, ...]]:
+        cfg.workers = workers
+        return list(batches(pool, cfg, SMALL, start_epoch))
+
+    two = drawn(2)
+    assert len(two) == 6 and two[0][0].shape == (2, 3, 48, 64)
+    reference = [_BatchSet(pool, cfg, SMALL)[it] for it in range(6)]  # in this process
+    for got in (two, drawn(1), drawn(2, start_epoch=1)):
+        for a, b in zip(got, reference[6 - len(got) :], strict=True):
+            assert all(torch.equal(u, v) for u, v in zip(a, b, strict=True))
+    assert not torch.equal(two[0][0], two[1][0])  # each batch its own draws
+    serial = drawn(0)  # the committed recipe's draws: one generator per epoch, unchanged
+    assert not torch.equal(serial[1][0], two[1][0])
+    with pytest.raises(ValueError, match="workers -1"):
+        drawn(-1)
+
+    val_set = write_dataset(tmp_path, 2, 40)
+    cfg = TrainConfig(
+        train=[DataSpec(str(train_set))],
+        val=[DataSpec(str(val_set))],
+        out_dir=str(tmp_path / "w2"),
+        weights_out=str(tmp_path / "w2" / "w.pt"),
+        epochs=2,
+        iters_per_epoch=2,
+        batch=2,
+        eval_every=2,
+        warmup_iters=1,
+        workers=2,
+        net=SMALL.to_dict(),
+    )
+    summary = train(cfg, log=lambda _: None)
+    assert [h["epoch"] for h in summary["history"]] == [0, 1]
+    assert (tmp_path / "w2" / "last.pt").exists()
+    assert not (tmp_path / "w2" / "last.pt.part").exists()
