@@ -152,13 +152,15 @@ class Tracker:
         left to the containment stage. Its own gates may fail while it shows again (a hand
         still half over it spoils its appearance), and a long-lost track (the hand's own,
         coasting where it passed) would otherwise take it in the cascade and keep it."""
+        old = np.array([self.tracks[ti].time_since_update > RECENT_FRAMES for ti in tis])
+        claimed = np.zeros(len(boxes), bool)
+        if not old.any():  # the common case: no long-lost track asks
+            return old[:, None] & claimed[None, :]
         recent = [
             t for t in self.tracks if t.confirmed and 0 < t.time_since_update <= RECENT_FRAMES
         ]
-        claimed = np.zeros(len(boxes), bool)
         for t in recent:
             claimed |= _contained(t.whole_xyxy, boxes) >= self.p.min_containment
-        old = np.array([self.tracks[ti].time_since_update > RECENT_FRAMES for ti in tis])
         return old[:, None] & claimed[None, :]
 
     def _far_from_last(self, tis: Sequence[int], zs: np.ndarray, depths: np.ndarray) -> np.ndarray:
