@@ -153,9 +153,9 @@ class Tracker:
         still half over it spoils its appearance), and a long-lost track (the hand's own,
         coasting where it passed) would otherwise take it in the cascade and keep it."""
         old = np.array([self.tracks[ti].time_since_update > RECENT_FRAMES for ti in tis])
-        claimed = np.zeros(len(boxes), bool)
         if not old.any():  # the common case: no long-lost track asks
-            return old[:, None] & claimed[None, :]
+            return np.zeros((len(tis), len(boxes)), bool)
+        claimed = np.zeros(len(boxes), bool)
         recent = [
             t for t in self.tracks if t.confirmed and 0 < t.time_since_update <= RECENT_FRAMES
         ]
