@@ -2,8 +2,8 @@
 
 We have no pretrained re-ID network (no downloads here) and oranges look alike, so the
 descriptor is deliberately simple and robust: the centre of the box (where the fruit is, not
-the leaves around it) sampled on a 16x16 grid of the frame's HSV image (converted once per
-frame, so 30 boxes cost 30 slicings, not 30 colour conversions), described by a hue-saturation
+the leaves around it) sampled on a 16x16 grid of the frame and converted to HSV (only the
+samples: a whole-frame conversion costs more than 30 boxes' samples), described by a hue-saturation
 and a value histogram per quadrant (4 quadrants x 4 bins) for shading/texture layout. Each
 part is normalised, square-rooted (Hellinger), and the vector is L2-normalised, so the cosine
 distance is 1 - dot product.
@@ -11,7 +11,6 @@ distance is 1 - dot product.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import cv2
@@ -23,8 +22,10 @@ PATCH_PX = 16
 
 
 def to_hsv(rgb: np.ndarray) -> np.ndarray:
-    """The frame in OpenCV HSV (H 0-179), the input of ``describe``."""
-    return cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2HSV)
+    """RGB pixels (any shape ending in 3) in OpenCV HSV (H 0-179); per pixel, so converting a
+    sample of a frame gives what converting the frame and then sampling it gives."""
+    flat = np.ascontiguousarray(rgb).reshape(1, -1, 3)
+    return cv2.cvtColor(flat, cv2.COLOR_RGB2HSV).reshape(rgb.shape)
 
 
 _HUE_BIN = np.minimum(np.arange(256) * 12 // 180, 11).astype(np.int64)
@@ -32,27 +33,49 @@ _Q = PATCH_PX // 2
 _QUAD = ((np.arange(PATCH_PX)[:, None] >= _Q) * 2 + (np.arange(PATCH_PX)[None, :] >= _Q)).ravel()
 
 
-def describe(hsv_image: np.ndarray, box_xyxy_px: np.ndarray) -> np.ndarray | None:
-    """Descriptor of the box's inner region; None when it is empty in the image.
+def describe(rgb_image: np.ndarray, box_xyxy_px: np.ndarray) -> np.ndarray | None:
+    """Descriptor of the box's inner region; None when it is empty in the image."""
+    return describe_many(rgb_image, np.asarray(box_xyxy_px, float)[None])[0]
 
-    One bincount makes all five histograms: codes 0-47 are hue x saturation, 48-63 quadrant x
-    value. Every part has a fixed number of samples (256, or 64 per quadrant), so normalising
-    each part and then the whole vector is one constant: sqrt(counts / 512).
+
+def describe_many(rgb_image: np.ndarray, boxes_xyxy_px: np.ndarray) -> list[np.ndarray | None]:
+    """Descriptors of the inner regions of N boxes (N, 4); None for a box empty in the image.
+
+    All boxes are sampled with one gather and binned with one bincount (a box's codes offset by
+    its index times DESCRIPTOR_DIM): per-box numpy calls cost more than the arithmetic with 30
+    boxes. Codes 0-47 are hue x saturation, 48-63 quadrant x value. Every part has a fixed
+    number of samples (256, or 64 per quadrant), so normalising each part and then the whole
+    vector is one constant: sqrt(counts / 512).
     """
-    h, w = hsv_image.shape[:2]
-    x1, y1, x2, y2 = (float(v) for v in box_xyxy_px)
-    dx, dy = (x2 - x1) * INNER, (y2 - y1) * INNER
-    a, b = min(max(math.floor(x1 + dx), 0), w), min(max(math.ceil(x2 - dx), 0), w)
-    c, d = min(max(math.floor(y1 + dy), 0), h), min(max(math.ceil(y2 - dy), 0), h)
-    if b - a < 2 or d - c < 2:
-        return None
-    ys = c + (np.arange(PATCH_PX) * (d - 1 - c) + (PATCH_PX - 1) // 2) // (PATCH_PX - 1)
-    xs = a + (np.arange(PATCH_PX) * (b - 1 - a) + (PATCH_PX - 1) // 2) // (PATCH_PX - 1)
-    patch = hsv_image[ys[:, None], xs[None, :]].reshape(-1, 3).astype(np.int64)
-    hs = _HUE_BIN[patch[:, 0]] * 4 + (patch[:, 1] >> 6)
-    qv = 48 + _QUAD * 4 + (patch[:, 2] >> 6)
-    counts = np.bincount(np.concatenate((hs, qv)), minlength=DESCRIPTOR_DIM)
-    return np.sqrt(counts / (2.0 * PATCH_PX * PATCH_PX))
+    h, w = rgb_image.shape[:2]
+    b = np.asarray(boxes_xyxy_px, float).reshape(-1, 4)
+    n = len(b)
+    if n == 0:
+        return []
+    dx, dy = (b[:, 2] - b[:, 0]) * INNER, (b[:, 3] - b[:, 1]) * INNER
+    a = np.clip(np.floor(b[:, 0] + dx), 0, w).astype(np.int64)
+    e = np.clip(np.ceil(b[:, 2] - dx), 0, w).astype(np.int64)
+    c = np.clip(np.floor(b[:, 1] + dy), 0, h).astype(np.int64)
+    d = np.clip(np.ceil(b[:, 3] - dy), 0, h).astype(np.int64)
+    ok = (e - a >= 2) & (d - c >= 2)
+    if not ok.any():
+        return [None] * n
+    a, e, c, d = a[ok], e[ok], c[ok], d[ok]
+    k = np.arange(PATCH_PX)
+    ys = c[:, None] + (k[None] * (d - 1 - c)[:, None] + (PATCH_PX - 1) // 2) // (PATCH_PX - 1)
+    xs = a[:, None] + (k[None] * (e - 1 - a)[:, None] + (PATCH_PX - 1) // 2) // (PATCH_PX - 1)
+    samples = rgb_image[ys[:, :, None], xs[:, None, :]].reshape(len(a), -1, 3)
+    patch = to_hsv(samples).astype(np.int64)
+    hs = _HUE_BIN[patch[..., 0]] * 4 + (patch[..., 1] >> 6)
+    qv = 48 + _QUAD[None] * 4 + (patch[..., 2] >> 6)
+    offset = (np.arange(len(a)) * DESCRIPTOR_DIM)[:, None]
+    codes = np.concatenate((hs + offset, qv + offset), axis=1)
+    counts = np.bincount(codes.ravel(), minlength=len(a) * DESCRIPTOR_DIM)
+    feats = np.sqrt(counts.reshape(len(a), DESCRIPTOR_DIM) / (2.0 * PATCH_PX * PATCH_PX))
+    out: list[np.ndarray | None] = [None] * n
+    for row, i in enumerate(np.flatnonzero(ok)):
+        out[i] = feats[row]
+    return out
 
 
 class Gallery:

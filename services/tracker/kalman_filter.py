@@ -60,27 +60,46 @@ class KalmanFilter:
         return mean, np.diag(np.square(std))
 
     def predict(self, mean: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        h = mean[3]
-        wp, wv = self._wp * h, self._wv * h
-        q = np.square([wp, wp, 1e-2, wp, wv, wv, 1e-5, wv])
-        return self._F @ mean, self._F @ cov @ self._F.T + np.diag(q)
+        means, covs = self.predict_many(mean[None], cov[None])
+        return means[0], covs[0]
 
-    def project(self, mean: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Mean and covariance in measurement space (with measurement noise)."""
-        h = mean[3]
-        r = np.square([self._wp * h, self._wp * h, 1e-1, self._wp * h])
-        return self._H @ mean, self._H @ cov @ self._H.T + np.diag(r)
+    def predict_many(self, means: np.ndarray, covs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """T tracks one frame ahead at once: (T, 8) means, (T, 8, 8) covariances. Batched
+        because 30 tracks' worth of tiny per-track numpy calls cost more than the arithmetic;
+        every entry of F P F^T sums two terms, so the result is the per-track one to the bit."""
+        h = means[:, 3]
+        wp, wv = self._wp * h, self._wv * h
+        q = np.square(
+            np.stack([wp, wp, np.full_like(h, 1e-2), wp, wv, wv, np.full_like(h, 1e-5), wv], 1)
+        )
+        out = self._F @ covs @ self._F.T
+        out[:, np.arange(8), np.arange(8)] += q
+        return means @ self._F.T, out
 
     def update(
         self, mean: np.ndarray, cov: np.ndarray, z: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        pm, pc = self.project(mean, cov)
-        # 4x4 systems: numpy's solve is exact enough and far cheaper per call than scipy's
+        means, covs = self.update_many(mean[None], cov[None], np.asarray(z, float)[None])
+        return means[0], covs[0]
+
+    def update_many(
+        self, means: np.ndarray, covs: np.ndarray, zs: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """M tracks corrected by their measurements (M, 4) at once (H selects the first four
+        state entries, so H P H^T and P H^T are slices)."""
+        h = means[:, 3]
+        r = np.square(
+            np.stack([self._wp * h, self._wp * h, np.full_like(h, 1e-1), self._wp * h], 1)
+        )
+        pc = covs[:, :4, :4].copy()
+        pc[:, np.arange(4), np.arange(4)] += r
+        # 4x4 systems: numpy's batched solve is exact enough and far cheaper than per-call
         # wrappers, which matters with 30 tracks at 15 Hz.
-        gain = np.linalg.solve(pc, (cov @ self._H.T).T).T
-        new_mean = mean + gain @ (z - pm)
-        new_cov = cov - gain @ pc @ gain.T
-        return new_mean, new_cov
+        gain = np.linalg.solve(pc, covs[:, :, :4].transpose(0, 2, 1)).transpose(0, 2, 1)
+        innovation = zs - means[:, :4]
+        new_means = means + np.einsum("mij,mj->mi", gain, innovation)
+        new_covs = covs - gain @ pc @ gain.transpose(0, 2, 1)
+        return new_means, new_covs
 
     def gating_distance(self, mean: np.ndarray, cov: np.ndarray, zs: np.ndarray) -> np.ndarray:
         """Squared Mahalanobis distance of each measurement (N, 4) to the predicted box."""

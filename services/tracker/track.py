@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import Enum
 
 import numpy as np
 
 from services.tracker.appearance import Gallery
-from services.tracker.kalman_filter import KalmanFilter, xyah_to_xyxy, xyxy_to_xyah
+from services.tracker.kalman_filter import KalmanFilter, xyxy_to_xyah
 
 WHOLE_VIEW_SHARE = 0.8
 """A box of at least this share of the largest box a track matched is a whole view of the fruit
@@ -69,24 +70,29 @@ class Track:
         return self.state is TrackState.DELETED
 
     def xyxy(self) -> np.ndarray:
-        return xyah_to_xyxy(self.mean[:4])
+        return np.array(self.xyxy_floats())
+
+    def xyxy_floats(self) -> tuple[float, float, float, float]:
+        """The predicted box, (x1, y1, x2, y2) px: ``xyah_to_xyxy`` in plain floats (the same
+        IEEE operations, without numpy's per-call cost on a 4-vector)."""
+        cx, cy, a, h = self.mean[:4].tolist()
+        hw, hh = a * h / 2, h / 2
+        return cx - hw, cy - hh, cx + hw, cy + hh
 
     def predict(self, kf: KalmanFilter, coast_velocity_decay: float = 1.0) -> None:
-        """One frame ahead. While the track coasts (missed last frame), its velocity decays:
-        fruit hang still, and a velocity learnt from a box shrinking behind an occluder would
-        otherwise carry the prediction away during a long occlusion."""
-        if self.time_since_update > 0:
-            self.mean[4:] *= coast_velocity_decay
-        self.mean, self.cov = kf.predict(self.mean, self.cov)
-        self.age += 1
-        self.time_since_update += 1
+        """One frame ahead (``predict_all`` for many tracks at once)."""
+        predict_all([self], kf, coast_velocity_decay)
 
     def update(self, kf: KalmanFilter, m: Measurement) -> None:
-        self.mean, self.cov = kf.update(self.mean, self.cov, xyxy_to_xyah(m.xyxy_px))
+        """Correct with a matched measurement (``update_all`` for many tracks at once)."""
+        update_all([(self, m)], kf)
+
+    def _absorb(self, m: Measurement, z: np.ndarray) -> None:
+        """Everything but the Kalman correction: gallery, size, whole view, depth, life cycle."""
         self.gallery.add(m.feature)
         self.score = m.score
         self.max_area_px = max(self.max_area_px, _area(m.xyxy_px))
-        self.last_xyah = xyxy_to_xyah(m.xyxy_px)
+        self.last_xyah = z
         box = np.asarray(m.xyxy_px, float)
         if _area(box) >= WHOLE_VIEW_SHARE * self.max_area_px:
             self.whole_xyxy = box
@@ -107,6 +113,36 @@ class Track:
     def mark_missed(self) -> None:
         if self.state is TrackState.TENTATIVE or self.time_since_update > self._max_age:
             self.state = TrackState.DELETED
+
+
+def predict_all(tracks: Sequence[Track], kf: KalmanFilter, coast_velocity_decay: float) -> None:
+    """Every track one frame ahead, in one batched Kalman step. While a track coasts (missed
+    last frame), its velocity decays: fruit hang still, and a velocity learnt from a box
+    shrinking behind an occluder would otherwise carry the prediction away during a long
+    occlusion."""
+    if not tracks:
+        return
+    means = np.stack([t.mean for t in tracks])
+    coasting = np.array([t.time_since_update > 0 for t in tracks])
+    means[coasting, 4:] *= coast_velocity_decay
+    means, covs = kf.predict_many(means, np.stack([t.cov for t in tracks]))
+    for t, mean, cov in zip(tracks, means, covs, strict=True):
+        t.mean, t.cov = mean, cov
+        t.age += 1
+        t.time_since_update += 1
+
+
+def update_all(pairs: Sequence[tuple[Track, Measurement]], kf: KalmanFilter) -> None:
+    """Every matched track corrected by its measurement, in one batched Kalman step."""
+    if not pairs:
+        return
+    zs = xyxy_to_xyah(np.stack([m.xyxy_px for _, m in pairs]))
+    means = np.stack([t.mean for t, _ in pairs])
+    covs = np.stack([t.cov for t, _ in pairs])
+    means, covs = kf.update_many(means, covs, zs)
+    for (t, m), mean, cov, z in zip(pairs, means, covs, zs, strict=True):
+        t.mean, t.cov = mean, cov
+        t._absorb(m, z)
 
 
 def _area(xyxy: np.ndarray) -> float:

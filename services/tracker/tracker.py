@@ -43,7 +43,7 @@ from services.tracker.linear_assignment import (
     matching_cascade,
     min_cost_matching,
 )
-from services.tracker.track import Measurement, Track
+from services.tracker.track import Measurement, Track, predict_all, update_all
 
 
 @dataclass(frozen=True)
@@ -80,14 +80,15 @@ class Tracker:
         self._next_id = 1  # per instance: two trackers never share a counter
 
     def predict(self) -> None:
-        for t in self.tracks:
-            t.predict(self.kf, self.p.coast_velocity_decay)
+        predict_all(self.tracks, self.kf, self.p.coast_velocity_decay)
 
     def update(self, dets: Sequence[Measurement]) -> dict[int, int]:
         """Update with this frame's measurements; returns detection index → track ID."""
         matches, unmatched_tracks, unmatched_dets = self._match(dets)
-        for ti, di in matches:
-            self.tracks[ti].update(self.kf, self._unoccluded(self.tracks[ti], dets[di]))
+        update_all(
+            [(self.tracks[ti], self._unoccluded(self.tracks[ti], dets[di])) for ti, di in matches],
+            self.kf,
+        )
         for ti in unmatched_tracks:
             self.tracks[ti].mark_missed()
         assigned = {di: self.tracks[ti].track_id for ti, di in matches}

@@ -251,3 +251,28 @@ def test_a_fruit_hidden_for_long_keeps_its_id_when_it_shows_again_nearly_in_plac
         step(tr, [])
     # Half a box height off (a leaf still covers its top), 3 cm deeper: the same fruit.
     assert step(tr, [BOX_A + np.array([0.0, 20.0, 0.0, 0.0])], [0.63]) == {0: 1}
+
+
+def test_batched_kalman_steps_equal_the_per_track_textbook_steps_to_the_bit() -> None:
+    # The batched predict/update replace 30 tracks' worth of per-track numpy calls; the
+    # tracker's outputs (and so every harvest run) must not move by a bit.
+    kf = KalmanFilter()
+    rng = np.random.default_rng(3)
+    means = np.c_[rng.uniform(50, 600, (7, 2)), rng.uniform(0.6, 1.4, 7), rng.uniform(10, 90, 7)]
+    means = np.c_[means, rng.normal(0, 2, (7, 4))]
+    a = rng.normal(0, 1, (7, 8, 8))
+    covs = a @ a.transpose(0, 2, 1) + np.eye(8)
+    zs = means[:, :4] + rng.normal(0, 3, (7, 4))
+    pm, pc = kf.predict_many(means, covs)
+    um, uc = kf.update_many(means, covs, zs)
+    F, H = kf._F, kf._H
+    for i in range(7):
+        h = means[i, 3]
+        wp, wv = kf._wp * h, kf._wv * h
+        q = np.diag(np.square([wp, wp, 1e-2, wp, wv, wv, 1e-5, wv]))
+        assert np.array_equal(pm[i], F @ means[i])
+        assert np.array_equal(pc[i], F @ covs[i] @ F.T + q)
+        s = H @ covs[i] @ H.T + np.diag(np.square([wp, wp, 1e-1, wp]))
+        gain = np.linalg.solve(s, (covs[i] @ H.T).T).T
+        np.testing.assert_allclose(um[i], means[i] + gain @ (zs[i] - H @ means[i]), rtol=1e-12)
+        np.testing.assert_allclose(uc[i], covs[i] - gain @ s @ gain.T, rtol=1e-9, atol=1e-9)

@@ -129,3 +129,25 @@ def test_detections_with_nan_or_inverted_boxes_never_reach_the_core() -> None:
     for bad in ("NaN,1.0,2.0,3.0", "50.0,50.0,10.0,10.0"):
         with pytest.raises(DecodeError):
             codec.decode(payload.replace(box, bad).encode())
+
+
+def test_descriptors_and_depths_of_many_boxes_equal_those_of_each_box_alone() -> None:
+    from services.tracker.appearance import describe, describe_many, to_hsv
+    from services.tracker.core import _median
+
+    rng = np.random.default_rng(5)
+    rgb = rng.integers(0, 256, (120, 160, 3), dtype=np.uint8)
+    # HSV per pixel: converting samples gives what sampling the converted frame gives.
+    ys, xs = rng.integers(0, 120, 500), rng.integers(0, 160, 500)
+    assert np.array_equal(to_hsv(rgb)[ys, xs], to_hsv(rgb[ys, xs]))
+    boxes = np.array([[10, 10, 60, 70], [150, 100, 200, 160], [40.5, 40.2, 41, 41], [-5, 0, 30, 9]])
+    many = describe_many(rgb, boxes)
+    for box, feat in zip(boxes, many, strict=True):
+        alone = describe(rgb, box)
+        assert (feat is None) == (alone is None)
+        assert feat is None or np.array_equal(feat, alone)
+    assert many[2] is None and many[0] is not None
+    np.testing.assert_allclose(np.linalg.norm(many[0]), 1.0)  # Hellinger: unit length
+    for n in (1, 2, 7, 8, 101):
+        v = rng.integers(0, 5000, n).astype(np.uint16)
+        assert _median(v) == float(np.median(v))
