@@ -15,7 +15,8 @@ list, with the identity rules the harvest needs.
   seen in the basket): it is marked ``in_basket`` and never selected.
 * The planning position of a record changes only when the estimate moves more than
   ``replan_m`` from it: perception noise does not shake the targets; a real move re-plans.
-  A target planned from a whole view is not moved by a cut, stale or much smaller view.
+  A target planned from a whole view is not moved by a stale or much smaller view, nor by a
+  cut one unless that view puts the fruit more than ``MOVED_VIEW_M`` away (a fruit pushed aside).
 """
 
 from __future__ import annotations
@@ -37,6 +38,21 @@ SHRUNK_VIEW = 0.85
 A fruit does not shrink; this happens after a tracker restart (a new track ID, so the scene has
 no whole view stored for it) while an arm passes in front: measured 27 % smaller and 1.2 cm
 off, the cutter then missed the peduncle twice."""
+
+MOVED_VIEW_M = 0.025
+"""A fresh view cut on a side (flagged or somewhat smaller; the scene takes a cut semi-axis
+from the other one) whose centre lies farther than this from a target planned from a
+whole view moves the target all the same, which stays held to whole-view rules: such a view's
+centre is off by about a centimetre, while a fruit pushed by a hand moves farther, and the
+views during the push are cut by the hand (paper-exp1: the hand moved a fruit 6 cm and the cut
+went where it had hung)."""
+
+MOVED_VIEW_SIZE = 0.75
+"""... and whose d_h is at least this share of the planned one: the views of the pushed fruit
+measured 0.77-0.86 of its whole view's d_h; a view after a tracker restart with an arm in front,
+1.2 cm off, 0.73 (``SHRUNK_VIEW``)."""
+
+CUT_FLAGS = {"edge_occluded", "border_cut"}
 
 
 @dataclass
@@ -61,6 +77,7 @@ class FruitRecord:
     losses: int = 0
     frozen: bool = False  # cutting or leaving: the planning position no longer follows the scene
     planned_whole: bool = False  # ``planned`` comes from a whole view (no side cut, fresh)
+    pushed: bool = False  # since then moved by cut views (``MOVED_VIEW_M``): followed closely
     scene_mark_ok: bool = True  # False: its ID was another fruit's, whose scene mark it carries
     reach: tuple[ReachVerdict, ReachVerdict] | None = None  # harvest pose, pre-pose
     last_seen_ns: int | None = None  # the last scene stamp with a fresh sighting of any of its IDs
@@ -140,9 +157,12 @@ class FruitBook:
     def _reused(self, rec: FruitRecord, f: Fruit, in_dish: InDish) -> bool:
         """``f`` (an ID of ``rec``) is fresh and far from ``rec``'s fruit, which is finished or
         has a newer ID, and not in our dish (a harvested fruit is seen there): the tracker gave
-        the ID to another fruit."""
-        if f.frames_unseen > 0 or not (rec.finished or f.fruit_id != rec.fruit_id):
-            return False
+        the ID to another fruit. Only an estimate of this frame counts: the scene keeps the
+        last one when a view gives none (``depth_inconsistent`` …), and a harvested fruit's
+        kept estimate from mid-fall lies outside the dish (paper-exp1 seed 11, planned: the
+        fruit in the basket was taken for a new one and the approach to it stalled)."""
+        if not _this_frames(f) or not (rec.finished or f.fruit_id != rec.fruit_id):
+            return False  # a kept estimate (a fruit mid-fall, say) is no evidence
         if in_dish(f, rec.outcome == "harvested"):
             return False
         p = np.array(f.position_world_m, float)
@@ -178,14 +198,26 @@ class FruitBook:
         whole = _whole(f)
         if rec.planned_whole and f.semi_axis_h_m < SHRUNK_VIEW * rec.planned.d_h_m:
             whole = False
-        if rec.planned_whole and not whole:
-            return  # a cut or stale view does not move a target planned from a whole one
         shape = shape_of(f)
         d = float(np.linalg.norm(shape.centre_world_m - rec.planned.centre_world_m))
+        if rec.planned_whole and not whole:
+            # A cut, stale or much smaller view does not move a target planned from a whole
+            # one, unless it is fresh, of the fruit's size, and far (the fruit was pushed).
+            sized = f.semi_axis_h_m >= MOVED_VIEW_SIZE * rec.planned.d_h_m
+            # Once pushed, followed as closely as a whole view (the cutter needs < 1.5 cm).
+            far = d > (self.replan_m if rec.pushed else MOVED_VIEW_M)
+            if _this_frames(f) and sized and far:
+                rec.pushed = True
+                # The centre moves; the size stays the whole view's (a cut view's is short).
+                rec.planned = FruitShape(shape.centre_world_m, rec.planned.d_h_m, rec.planned.d_v_m)
+                rec.reach = None
+                self.moved.append((rec.key, d))
+            return
         if d > self.replan_m or (whole and not rec.planned_whole):
             rec.planned = shape
             rec.reach = None
             rec.planned_whole = whole
+            rec.pushed = False
             if d > self.replan_m:
                 self.moved.append((rec.key, d))
 
@@ -229,6 +261,12 @@ class FruitBook:
     def detected(self) -> list[FruitRecord]:
         """Every physical fruit seen on the tree (fruit seen only in the basket left out)."""
         return [r for _, r in sorted(self.records.items()) if not r.in_basket]
+
+
+def _this_frames(f: Fruit) -> bool:
+    """The scene computed this estimate from this frame's view (whole or cut on a side):
+    nothing kept from an earlier frame."""
+    return f.frames_unseen == 0 and set(f.flags) <= CUT_FLAGS
 
 
 def _whole(f: Fruit) -> bool:

@@ -140,6 +140,33 @@ def test_a_much_smaller_unflagged_view_does_not_move_a_target_planned_from_a_who
     assert np.allclose(r.planned.centre_world_m, (0.75, 0.05, 1.25)) and b.moved
 
 
+def test_a_fruit_pushed_aside_under_cut_views_moves_its_target_but_a_stale_view_does_not() -> None:
+    # paper-exp1: a hand pushes the fruit 6 cm while covering a side of it; every view of the
+    # push is cut (flagged or smaller), and the cut went where the fruit had hung.
+    b = FruitBook(same_fruit_m=0.08, replan_m=0.015)
+    b.update(scene(fruit(6, (0.695, -0.08, 1.22))), never)  # whole
+    r = b.records[6]
+
+    def cut(p: tuple[float, float, float], **kw: object) -> Fruit:
+        return fruit(6, p).model_copy(update={"flags": ("edge_occluded",), **kw})
+
+    b.update(scene(cut((0.695, -0.06, 1.225))), never)  # 2.1 cm: a cut view's error, kept
+    assert np.allclose(r.planned.centre_world_m, (0.695, -0.08, 1.22))
+    stale = cut((0.695, -0.02, 1.244), flags=("edge_occluded", "stale"), frames_unseen=1)
+    b.update(scene(stale), never)  # an old estimate, however far: kept
+    assert np.allclose(r.planned.centre_world_m, (0.695, -0.08, 1.22))
+    shrunk = cut((0.695, -0.047, 1.23), semi_axis_h_m=0.028)
+    b.update(scene(shrunk), never)  # 30 % smaller: cut on both sides, not trusted
+    assert np.allclose(r.planned.centre_world_m, (0.695, -0.08, 1.22))
+    b.update(scene(cut((0.695, -0.047, 1.23))), never)  # the fruit's size, 3.4 cm away: moved
+    assert np.allclose(r.planned.centre_world_m, (0.695, -0.047, 1.23)) and b.moved
+    b.update(scene(cut((0.695, -0.037, 1.23))), never)  # 1 cm on: within a view's noise
+    assert np.allclose(r.planned.centre_world_m, (0.695, -0.047, 1.23))
+    b.update(scene(cut((0.695, -0.021, 1.244), semi_axis_v_m=0.03)), never)  # 2.1 cm on: a
+    assert np.allclose(r.planned.centre_world_m, (0.695, -0.021, 1.244))  # pushed fruit followed
+    assert r.planned.d_v_m == 0.038  # the whole view's size: the peduncle is d_v above
+
+
 def test_the_id_of_a_harvested_fruit_seen_on_another_fruit_is_a_new_fruit() -> None:
     # The tracker re-attached the track of a harvested fruit to another fruit's box, 30 cm away:
     # that fruit is a candidate although the scene marks its ID harvested (the old fruit's mark).
@@ -177,3 +204,20 @@ def test_a_harvested_fruit_seen_in_the_dish_or_a_dropped_one_seen_fallen_is_not_
         lambda f, resting=False: f.fruit_id == 2,
     )
     assert sorted(b.records) == [2, 3] and b.candidates(45) == []
+
+
+def test_a_harvested_fruits_estimate_kept_from_mid_fall_does_not_make_it_a_new_fruit() -> None:
+    # paper-exp1 seed 11, planned: the scene kept a harvested fruit's estimate from its fall
+    # (its later views gave no depth), 4.5 cm outside the dish; the planner took it for a new
+    # fruit, and the approach to it stalled and blocked the fruit beside it.
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    b.update(scene(fruit(1, (0.529, -0.05, 1.469))), never)
+    b.records[1].outcome = "harvested"
+    kept = fruit(1, (0.477, -0.063, 1.3)).model_copy(
+        update={"flags": ("edge_occluded", "depth_inconsistent"), "status": "harvested"}
+    )
+    b.update(scene(kept), never)
+    assert sorted(b.records) == [1] and b.candidates(45) == []
+    fresh = kept.model_copy(update={"flags": ("edge_occluded",)})
+    b.update(scene(fresh), never)  # this frame's view, far and not in the dish: another fruit
+    assert sorted(b.records) == [-1, 1]
