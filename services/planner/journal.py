@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from schemas.scene import Fruit
-from services.planner.book import FruitBook, FruitRecord
+from services.planner.book import MIN_SIGHTINGS, FruitBook, FruitRecord
 from services.planner.poses import FruitShape
 
 log = logging.getLogger("planner")
@@ -64,6 +64,7 @@ def _record(r: FruitRecord) -> dict[str, Any]:
         "losses": r.losses,
         "scene_mark_ok": r.scene_mark_ok,
         "last_seen_ns": r.last_seen_ns,
+        "sightings": r.sightings,
     }
 
 
@@ -88,6 +89,7 @@ def _unrecord(d: dict[str, Any]) -> FruitRecord:
         planned_whole=d["planned_whole"],
         scene_mark_ok=d.get("scene_mark_ok", True),
         last_seen_ns=d.get("last_seen_ns"),
+        sightings=d.get("sightings", MIN_SIGHTINGS),  # older journals: records were fruit
     )
 
 

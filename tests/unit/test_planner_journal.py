@@ -9,7 +9,7 @@ import pytest
 
 from services.planner import Settings
 from services.planner import journal as jr
-from services.planner.book import FruitBook
+from services.planner.book import MIN_SIGHTINGS, FruitBook
 from services.planner.core import PlannerCore
 from services.runtime.settings import load_settings
 from tests.unit.test_planner_book import fruit, never, scene
@@ -19,7 +19,8 @@ def book_with_two() -> FruitBook:
     b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
     b.update(scene(fruit(3, (0.6, 0.0, 1.3))), never)
     b.update(scene(fruit(3, (0.6, 0.0, 1.3), unseen=4), fruit(9, (0.61, 0.0, 1.3))), never)
-    b.update(scene(fruit(9, (0.61, 0.0, 1.3)), fruit(4, (0.7, 0.05, 1.25))), never)
+    for _ in range(MIN_SIGHTINGS):
+        b.update(scene(fruit(9, (0.61, 0.0, 1.3)), fruit(4, (0.7, 0.05, 1.25))), never)
     r = b.records[3]
     r.outcome, r.started_ns, r.finished_ns, r.spent_ns, r.cuts = "harvested", 10, 20, 10, 1
     b.records[4].losses, b.records[4].deferred = 1, True
@@ -40,6 +41,7 @@ def test_a_journal_gives_back_every_record_and_the_pending_cut(tmp_path: Path) -
     assert np.allclose(got.planned.centre_world_m, was.planned.centre_world_m)
     assert got.seen == was.seen and not got.in_scene  # until a scene lists it again
     assert fresh.records[4].losses == 1 and fresh.records[4].deferred
+    assert fresh.records[4].sightings == b.records[4].sightings == MIN_SIGHTINGS
     # The harvested fruit is never a candidate again; the other one is once it is seen.
     fresh.update(scene(fruit(9, (0.61, 0.0, 1.3)), fruit(4, (0.7, 0.05, 1.25))), never)
     assert [r.key for r in fresh.candidates(45)] == [4]

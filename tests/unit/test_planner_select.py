@@ -8,6 +8,7 @@ import pytest
 from schemas.base import Header
 from schemas.scene import Fruit, Obstacles, SceneState, Trunk
 from services.planner import Settings
+from services.planner.book import MIN_SIGHTINGS
 from services.planner.clutter import blockers, clearable
 from services.planner.core import PlannerCore
 from services.planner.kinematics import ReachVerdict
@@ -39,15 +40,16 @@ def fruit(fid: int, p: tuple[float, float, float], distance_m: float) -> Fruit:
 def core_with(order: str, *fruits: Fruit) -> PlannerCore:
     """A planner core whose book holds ``fruits``, every pose reachable by the IK."""
     core = PlannerCore(load_settings(Settings, {"order": order}))
-    core.book.update(
-        SceneState(
-            header=Header(stamp_ns=0, seq=0, source="scene"),
-            fruits=fruits,
-            trunk=Trunk(found=False),
-            obstacles=Obstacles(),
-        ),
-        lambda _f, resting=False: False,
-    )
+    for seq in range(MIN_SIGHTINGS):  # seen in a few scene states: fruit, not flashes
+        core.book.update(
+            SceneState(
+                header=Header(stamp_ns=0, seq=seq, source="scene"),
+                fruits=fruits,
+                trunk=Trunk(found=False),
+                obstacles=Obstacles(),
+            ),
+            lambda _f, resting=False: False,
+        )
     for r in core.book.records.values():
         r.reach = (OK, OK)
     return core
@@ -165,7 +167,13 @@ def test_the_controller_is_not_told_to_avoid_a_second_track_of_the_target_nor_a_
     # track of B (harvested, by its track 8) listed where B hung.
     under_a = (A[0], A[1], A[2] - 0.05)
     b_again = (B[0], B[1] + 0.05, B[2])
-    core = core_with("nearest", fruit(1, A, 0.5), fruit(11, under_a, 0.5), fruit(8, b_again, 0.6))
+    core = core_with(
+        "nearest",
+        fruit(1, A, 0.5),
+        fruit(11, under_a, 0.5),
+        fruit(7, B, 0.6),  # seen on B before B's track 8 took over
+        fruit(8, b_again, 0.6),
+    )
     core.book.update(
         SceneState(
             header=Header(stamp_ns=1, seq=1, source="scene"),
