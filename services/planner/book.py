@@ -227,7 +227,8 @@ class FruitBook:
         if f.frames_unseen == 0 and in_dish(f):
             rec.in_basket = True
         whole = _whole(f)
-        if rec.planned_whole and _shrunk(f, rec.planned, SHRUNK_VIEW):
+        planned_m = (rec.planned.d_h_m, rec.planned.d_v_m)
+        if rec.planned_whole and _shrunk(f, planned_m, SHRUNK_VIEW):
             whole = False
         if whole and _smaller_than_shown(f, rec.sizes_m):
             whole = False
@@ -238,7 +239,7 @@ class FruitBook:
         if rec.planned_whole and not whole:
             # A cut, stale or much smaller view does not move a target planned from a whole
             # one, unless it is fresh, of the fruit's size, and far (the fruit was pushed).
-            sized = not _shrunk(f, rec.planned, MOVED_VIEW_SIZE)
+            sized = not _shrunk(f, planned_m, MOVED_VIEW_SIZE)
             # Once pushed, followed as closely as a whole view (the cutter needs < 1.5 cm).
             far = d > (self.replan_m if rec.pushed else MOVED_VIEW_M)
             if _this_frames(f) and sized and far:
@@ -301,11 +302,12 @@ class FruitBook:
         return [r for _, r in sorted(self.records.items()) if not r.in_basket and r.confirmed]
 
 
-def _shrunk(f: Fruit, planned: FruitShape, share: float) -> bool:
-    """Either semi-axis of the view below ``share`` of the planned one: a view cut by
+def _shrunk(f: Fruit, size_m: tuple[float, float], share: float) -> bool:
+    """Either semi-axis of the view below ``share`` of ``size_m`` (d_h, d_v): a view cut by
     something (the top hidden, paper-exp2 seed 12: d_v 1.7 cm of 3.6, the centre 2 cm low,
     and the cuts went 1.6 cm under the peduncle)."""
-    return f.semi_axis_h_m < share * planned.d_h_m or f.semi_axis_v_m < share * planned.d_v_m
+    d_h_m, d_v_m = size_m
+    return f.semi_axis_h_m < share * d_h_m or f.semi_axis_v_m < share * d_v_m
 
 
 def _smaller_than_shown(f: Fruit, sizes_m: deque[tuple[float, float]]) -> bool:
@@ -318,7 +320,7 @@ def _smaller_than_shown(f: Fruit, sizes_m: deque[tuple[float, float]]) -> bool:
     if len(sizes_m) < MIN_RECENT_VIEWS:
         return False
     h_m, v_m = np.percentile(np.array(sizes_m), SEEN_SIZE_QUANTILE, axis=0)
-    return f.semi_axis_h_m < SHRUNK_VIEW * h_m or f.semi_axis_v_m < SHRUNK_VIEW * v_m
+    return _shrunk(f, (float(h_m), float(v_m)), SHRUNK_VIEW)
 
 
 def _this_frames(f: Fruit) -> bool:

@@ -584,7 +584,6 @@ class Machine:
             for r in self.book.detected()
             if r is not rec
             and r.in_scene
-            and r.confirmed
             and r.outcome not in ("harvested", "dropped")
             and not self._ghost(r)
         ]
