@@ -8,11 +8,11 @@ are left out by colour; the robot's own bark-coloured shadows by its capsules.
 
 Each voxel holding at least ``min_points`` of this frame's points is *seen*; its obstacle is a
 sphere at the mean of the points it ever held. A voxel is forgotten when the depth image shows
-space behind it for ``clear_frames`` consecutive frames (something moved away), or after
-``forget_after_frames`` frames without a hit. A voxel hidden behind an arm gets neither (the
-depth there is nearer than the voxel): it is remembered, which is the point of persistence. A
-pixel with no valid depth (0, NaN, inf) is no evidence either way, so a broken frame neither
-creates nor wipes obstacles.
+space behind it for ``clear_frames`` consecutive frames (something moved away; depth beyond
+``max_depth_m`` counts), or after ``forget_after_frames`` frames without a hit. A voxel hidden
+behind an arm gets neither (the depth there is nearer than the voxel): it is remembered, which
+is the point of persistence. A pixel with no valid depth (0, NaN, inf) is no evidence either
+way, so a broken frame neither creates nor wipes obstacles.
 """
 
 from __future__ import annotations
@@ -76,8 +76,12 @@ class OccupancyGrid:
         """Take one frame: ``mask`` (H, W) bark-coloured pixels, ``depth_m`` (H, W) depth in m
         (0 / NaN / inf: invalid), the camera ``K`` and pose ``T``, the robot's capsules."""
         self.frame += 1
-        valid = np.isfinite(depth_m) & (depth_m > 0) & (depth_m <= self.p.max_depth_m)
-        self._clear(depth_m, valid, K, T)
+        measured = np.isfinite(depth_m) & (depth_m > 0)
+        valid = measured & (depth_m <= self.p.max_depth_m)
+        # Depth beyond max_depth_m makes no obstacle, but it shows the space in front free: the
+        # background behind a hand that swept past is often that far (paper-exp1: the hand's
+        # voxels stayed in front of the arms for the rest of the run).
+        self._clear(depth_m, measured, K, T)
         pts = _points_world(mask & valid, depth_m, K, T, self.p.stride_px)
         if robot and len(pts):
             pts = pts[~_near_robot(pts, robot, self.p.robot_margin_m)]

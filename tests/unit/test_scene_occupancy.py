@@ -121,6 +121,21 @@ def test_a_branch_hidden_behind_an_arm_is_remembered_and_one_gone_is_forgotten()
     assert grid.obstacles() == ()
 
 
+def test_a_hand_gone_is_forgotten_when_the_background_is_beyond_the_depth_limit() -> None:
+    """A skin-coloured hand (bark to the HSV box) sweeps 0.3 m ahead and leaves; the background
+    behind it is beyond max_depth_m. Its far depth still shows the hand gone."""
+    near = Scene()
+    near.plane_rect(0.3, 250, 400, 200, 300, colour=BARK)
+    grid = OccupancyGrid(P)
+    grid.step(bark_mask(near), near.depth, K, T, ())
+    assert len(grid.obstacles()) > 0
+    far = Scene()
+    far.plane_rect(P.max_depth_m + 1.4, 0, K.width, 0, K.height, colour=(200, 200, 200))
+    for _ in range(P.clear_frames):
+        grid.step(bark_mask(far), far.depth, K, T, ())
+    assert grid.obstacles() == ()
+
+
 # ---- in the scene core --------------------------------------------------------------------
 def run_core(sc: Scene, boxes: dict[int, tuple], **settings: object):  # type: ignore[no-untyped-def]
     core = SceneCore(load_settings(Settings, {"robot_self_filter": False, **settings}))
