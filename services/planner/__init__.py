@@ -189,6 +189,17 @@ class Settings(ServiceSettings):
         ge=10,
         description="A plan gives up after this many configurations checked (~0.3 ms each).",
     )
+    plan_goal_margin_m: float = Field(
+        default=0.02,
+        ge=0,
+        le=0.1,
+        description="IK solutions of the pre-pose closer than plan_margin_m to an obstacle are "
+        "first moved in the arms' null space (the tools held) until this far from every "
+        "obstacle, where they can be (goalclear.py), m; 0: the IK's solutions as they are.",
+    )
+    plan_goal_steps: int = Field(
+        default=200, ge=1, description="… in at most this many IK steps (~1 ms each)."
+    )
     plan_trunk_margin_m: float = Field(
         default=0.08,
         ge=0,

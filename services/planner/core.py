@@ -56,7 +56,7 @@ class PlannerCore:
         if s.plan_approach != "off":
             from services.planner.motion import ApproachPlanner
 
-            self.machine.motion = ApproachPlanner(s)
+            self.machine.motion = ApproachPlanner(s, self.kin.solver)
         self.stamper = Stamper(NAME)
         self.targets_sent = 0
         self.basket_count: int | None = None

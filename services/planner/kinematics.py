@@ -57,6 +57,14 @@ class ReachVerdict:
 
 
 @dataclass(frozen=True)
+class IkSolution:
+    """Joints (arm order, rad) that take the tools to a pose, at one sampled cutter yaw."""
+
+    yaw_deg: float
+    q_rad: np.ndarray
+
+
+@dataclass(frozen=True)
 class DishPose:
     """Where the dish is: centre of its floor and its normal, world frame."""
 
@@ -82,7 +90,7 @@ class Kinematics:
         self.yaws_deg, self.iterations, self.tolerance_m = yaws_deg, iterations, tolerance_m
         self.cache_mm = cache_mm
         self._cache: dict[tuple[int, int, int, int], ReachVerdict] = {}
-        self._solutions: dict[tuple[int, int, int, int], list[np.ndarray]] = {}
+        self._solutions: dict[tuple[int, int, int, int], list[IkSolution]] = {}
         self.ik_solves = 0
         model = self.fk.model
         idx = [model.joints[model.getJointId(n)].idx_q for r in ARM_ROLES for n in joint_names(r)]
@@ -145,9 +153,9 @@ class Kinematics:
         q = [r.get_joint(n) for role in ARM_ROLES for n in joint_names(role)]
         return np.clip(np.array(q, float), self._lower_rad, self._upper_rad)
 
-    def solutions(self, tip_world_m: np.ndarray, basket_below_m: float) -> list[np.ndarray]:
-        """The IK solutions of this pose at every sampled yaw that reaches it (arm order, rad):
-        the planned approach picks the one clearest of the obstacles. Cached like ``reach``."""
+    def solutions(self, tip_world_m: np.ndarray, basket_below_m: float) -> list[IkSolution]:
+        """The IK solutions of this pose at every sampled yaw that reaches it: the planned
+        approach picks the one clearest of the obstacles. Cached like ``reach``."""
         key = tuple(round(float(v) * 1e3 / self.cache_mm) for v in (*tip_world_m, basket_below_m))
         got = self._solutions.get(key)  # type: ignore[arg-type]
         if got is not None:
@@ -159,7 +167,7 @@ class Kinematics:
                 np.asarray(tip_world_m, float), math.radians(yaw), self.iterations, basket_below_m
             )
             if pe < self.tolerance_m and be < self.tolerance_m:
-                out.append(self._solution())
+                out.append(IkSolution(yaw, self._solution()))
         self._solutions[key] = out  # type: ignore[index]
         return out
 

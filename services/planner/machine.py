@@ -294,7 +294,7 @@ class Machine:
         if not goals:
             return None
         seed = rec.fruit_id * 1000 + self.motion.plans
-        plan = self.motion.plan(self.q_rad, goals, rec.planned, seed)
+        plan = self.motion.plan(self.q_rad, goals, rec.planned, seed, p, self._ignore(None))
         self.left_because = plan.why
         if plan.path is None:
             return None

@@ -17,8 +17,11 @@ import numpy as np
 from schemas.scene import CylinderObstacle, Obstacles, Trunk
 from services.planner import Settings
 from services.planner.freespace import FreeSpace, validity
-from services.planner.poses import FruitShape
+from services.planner.goalclear import GoalClearer
+from services.planner.kinematics import IkSolution
+from services.planner.poses import FruitShape, ToolPoses
 from services.planner.rrt import PlanResult, rrt_connect
+from services.robot.reach import ReachSolver
 
 
 @dataclass(frozen=True)
@@ -30,28 +33,45 @@ class ApproachPlan:
 
 
 class ApproachPlanner:
-    """Plans with the obstacles of the latest scene state (``obstacles``, set by the core)."""
+    """Plans with the obstacles of the latest scene state (``obstacles``, set by the core).
 
-    def __init__(self, s: Settings) -> None:
+    ``solver``: the IK for clearing goals (``plan_goal_margin_m``); None: goals as given."""
+
+    def __init__(self, s: Settings, solver: ReachSolver | None = None) -> None:
         self.s = s
         self.space = FreeSpace(cull_m=max(s.plan_margin_m, s.plan_self_margin_m) + 0.02)
+        self.clearer = (
+            GoalClearer(
+                solver, self.space, s.plan_goal_margin_m, s.plan_goal_steps, s.reach_tolerance_m
+            )
+            if solver is not None and s.plan_goal_margin_m > 0
+            else None
+        )
         self.obstacles: Obstacles | None = None
         self.trunk: Trunk | None = None
         self.plans = 0
         self.found = 0
 
     def plan(
-        self, start: np.ndarray, goals: list[np.ndarray], target: FruitShape, seed: int
+        self,
+        start: np.ndarray,
+        goals: list[IkSolution],
+        target: FruitShape,
+        seed: int,
+        pose: ToolPoses | None = None,
+        ignore_fruit_ids: tuple[int, ...] = (),
     ) -> ApproachPlan:
-        """A path from ``start`` to the clearest of ``goals`` (IK solutions of the pre-pose,
-        arm order, rad) for the approach to ``target``."""
+        """A path from ``start`` (arm order, rad) to the clearest of ``goals`` (IK solutions of
+        the pre-pose ``pose``) for the approach to ``target``; the fruit in
+        ``ignore_fruit_ids`` are no obstacles (those the controller ignores: off the tree)."""
         s = self.s
         self.plans += 1
         if self.obstacles is not None:
             self.space.set_obstacles(
-                trunk_for(self.obstacles, self.trunk, target, s.plan_trunk_margin_m)
+                trunk_for(self.obstacles, self.trunk, target, s.plan_trunk_margin_m),
+                ignore_fruit_ids,
             )
-        goal = max(goals, key=lambda q: self.space.clearance(q).obstacles_m)
+        goal, moved = self._goal(goals, pose)
         valid, c0, c1 = validity(
             self.space,
             start,
@@ -70,7 +90,7 @@ class ApproachPlanner:
             np.random.default_rng(seed),
             max_checks=s.plan_max_checks,
         )
-        ends = f"clearance {c0.describe()} at the start, {c1.describe()} at the end"
+        ends = f"clearance {c0.describe()} at the start, {c1.describe()} at the end{moved}"
         if res.path is None:
             return ApproachPlan(None, f"no planned path ({res.why}; {ends}): pose goals")
         self.found += 1
@@ -78,6 +98,24 @@ class ApproachPlanner:
             res.path,
             f"planned joint path {res.length_rad:.2f} rad, {res.checks} checks ({ends})",
         )
+
+    def _goal(self, goals: list[IkSolution], pose: ToolPoses | None) -> tuple[np.ndarray, str]:
+        """The clearest goal, and what the reason adds when it was moved clear. Goals closer
+        than the path's margin are first moved clear (``GoalClearer``), where a clearer is set."""
+        clearance = self.space.clearance
+        best = max(goals, key=lambda g: clearance(g.q_rad).obstacles_m)
+        before = clearance(best.q_rad)
+        if self.clearer is None or pose is None or before.obstacles_m >= self.s.plan_margin_m:
+            return best.q_rad, ""
+        moved = []
+        for g in goals:
+            c = self.clearer.clear(g.q_rad, pose.tip_world_m, g.yaw_deg, pose.basket_below_m)
+            if c.q_rad is not None:
+                moved.append(c.q_rad)
+        if not moved:
+            return best.q_rad, f" (no goal could be moved clear of {before.describe()})"
+        q = max(moved, key=lambda m: clearance(m).obstacles_m)
+        return q, f" (goal moved clear of {before.describe()})"
 
 
 def trunk_for(

@@ -11,6 +11,7 @@ import itertools
 import math
 import sys
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -68,21 +69,33 @@ class ReachSolver:
         iters: int = 250,
         basket_below_m: float = BASKET_BELOW_M,
     ) -> tuple[float, float]:
-        """IK of the harvest pose. The cutter points forward (tool axis horizontal) turned by
-        ``yaw_rad`` about the world vertical (the paper's free θ_a, sampled by ``reach``); the dish
-        is ``basket_below_m`` under the tip, opening up, its rotation about its own normal free.
-        Returns (tip error, relative error) in m (orientation errors × 0.1 m/rad)."""
-        offset = np.array([basket_below_m, 0.0, 0.0])  # cutter x points down
-        pl, r = self.placo, self.robot
+        """IK of the harvest pose from the home posture. The cutter points forward (tool axis
+        horizontal) turned by ``yaw_rad`` about the world vertical (the paper's free θ_a, sampled
+        by ``reach``); the dish is ``basket_below_m`` under the tip, opening up, its rotation
+        about its own normal free. Returns (tip error, relative error) in m (orientation errors
+        × 0.1 m/rad)."""
         self.set_home()
-        s = pl.KinematicsSolver(r)
+        s = self.harvest_solver(p_tip_world, yaw_rad, basket_below_m)
+        for _ in range(iters):
+            try:
+                s.solve(True)
+            except RuntimeError:
+                break
+            self.robot.update_kinematics()
+        return self.residuals(p_tip_world, yaw_rad, basket_below_m)
+
+    def harvest_solver(self, p_tip_world: np.ndarray, yaw_rad: float, basket_below_m: float) -> Any:
+        """A placo KinematicsSolver on ``robot`` (from its joints now) with the harvest pose's
+        soft tasks (see ``solve``), joint and velocity limits and self-collision avoidance;
+        the caller steps it (``solve(True)``, then ``robot.update_kinematics()``)."""
+        offset = np.array([basket_below_m, 0.0, 0.0])  # cutter x points down
+        s = self.placo.KinematicsSolver(self.robot)
         s.mask_fbase(True)
         s.enable_joint_limits(True)
         s.add_regularization_task(1e-5)
-        R = rot_z(yaw_rad) @ _FWD
         pos = s.add_position_task(TOOL_FRAME["cutter"], p_tip_world)
         pos.configure("tip", "soft", 1.0)
-        ori = s.add_orientation_task(TOOL_FRAME["cutter"], R)
+        ori = s.add_orientation_task(TOOL_FRAME["cutter"], rot_z(yaw_rad) @ _FWD)
         ori.configure("tip_ori", "soft", 1.0)
         rpos = s.add_relative_position_task(TOOL_FRAME["cutter"], TOOL_FRAME["collector"], offset)
         rpos.configure("rel", "soft", 1.0)
@@ -97,12 +110,16 @@ class ReachSolver:
         sc.self_collisions_trigger = 0.05
         s.enable_velocity_limits(True)
         s.dt = 0.02
-        for _ in range(iters):
-            try:
-                s.solve(True)
-            except RuntimeError:
-                break
-            r.update_kinematics()
+        return s
+
+    def residuals(
+        self, p_tip_world: np.ndarray, yaw_rad: float, basket_below_m: float
+    ) -> tuple[float, float]:
+        """(tip error, relative error) of ``robot``'s joints now for the harvest pose, m (see
+        ``solve``)."""
+        r = self.robot
+        R = rot_z(yaw_rad) @ _FWD
+        offset = np.array([basket_below_m, 0.0, 0.0])
         T = r.get_T_world_frame(TOOL_FRAME["cutter"])
         pos_err = float(np.linalg.norm(T[:3, 3] - p_tip_world))
         pos_err += 0.1 * float(np.linalg.norm(_log3(R @ T[:3, :3].T)))

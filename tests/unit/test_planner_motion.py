@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from schemas.base import ARM_ROLES
-from schemas.scene import CylinderObstacle, Obstacles, SphereObstacle, Trunk
+from schemas.scene import CylinderObstacle, EllipsoidObstacle, Obstacles, SphereObstacle, Trunk
 from services.planner.core import PlannerCore
+from services.planner.kinematics import IkSolution
 from services.planner.machine import Goal
 from services.planner.motion import ApproachPlanner, trunk_for
 from services.planner.poses import FruitShape, pre_pose
@@ -32,12 +33,20 @@ def planned_core() -> PlannerCore:
     return core
 
 
-def pre_pose_joints(core: PlannerCore) -> np.ndarray:
+def pre_pose_solution(core: PlannerCore) -> IkSolution:
     rec = core.book.records[1]
     p = pre_pose(rec.planned, core.machine.pose_settings)
     solutions = core.kin.solutions(p.tip_world_m, p.basket_below_m)
     assert solutions
     return solutions[0]
+
+
+def pre_pose_joints(core: PlannerCore) -> np.ndarray:
+    return pre_pose_solution(core).q_rad
+
+
+def ik(*qs: np.ndarray) -> list[IkSolution]:
+    return [IkSolution(0.0, q) for q in qs]
 
 
 def test_a_branch_on_the_straight_way_is_gone_round_to_the_clearest_goal() -> None:
@@ -55,7 +64,7 @@ def test_a_branch_on_the_straight_way_is_gone_round_to_the_clearest_goal() -> No
     s = core.machine.s
     assert space.clearance(mid).obstacles_m < 0  # the straight way hits it, the ends are clear
     assert min(space.clearance(HOME).obstacles_m, space.clearance(goal).obstacles_m) > 0.05
-    plan = planner.plan(HOME, [mid, goal], core.book.records[1].planned, seed=1)
+    plan = planner.plan(HOME, ik(mid, goal), core.book.records[1].planned, seed=1)
     assert plan.path is not None, plan.why
     assert plan.why.startswith("planned joint path")
     assert np.allclose(plan.path[0], HOME) and np.allclose(plan.path[-1], goal)
@@ -78,9 +87,62 @@ def test_no_path_is_reported_and_the_pose_goals_are_used() -> None:
     planner.obstacles = Obstacles(
         spheres=(SphereObstacle(name="occupied_1", center_world_m=tuple(tip), radius_m=0.3),)
     )
-    plan = planner.plan(HOME, [goal], core.book.records[1].planned, seed=1)
+    plan = planner.plan(HOME, ik(goal), core.book.records[1].planned, seed=1)
     assert plan.path is None
     assert plan.why.startswith("no planned path (") and plan.why.endswith("pose goals")
+
+
+def elbow_in_a_branch(core: PlannerCore, planner: ApproachPlanner) -> IkSolution:
+    """A branch sphere on the collector's elbow at the pre-pose's IK solution."""
+    sol = pre_pose_solution(core)
+    robot = planner.space.robot
+    robot.set_q(sol.q_rad)
+    elbow = robot.data.oMi[robot.model.getJointId("collector_j4")].translation
+    planner.obstacles = Obstacles(
+        spheres=(SphereObstacle(name="occupied_1", center_world_m=tuple(elbow), radius_m=0.03),)
+    )
+    return sol
+
+
+def test_a_goal_with_an_elbow_in_a_branch_is_moved_clear_with_the_tools_held() -> None:
+    core = planned_core()
+    s, rec = core.machine.s, core.book.records[1]
+    pose = pre_pose(rec.planned, core.machine.pose_settings)
+    plain = ApproachPlanner(s.model_copy(update={"plan_max_checks": 300}))  # no IK: as it is
+    sol = elbow_in_a_branch(core, plain)
+    got = plain.plan(HOME, [sol], rec.planned, 1, pose)
+    assert got.path is None and "-30 mm (branch) at the end):" in got.why
+
+    planner = ApproachPlanner(s, core.kin.solver)
+    sol = elbow_in_a_branch(core, planner)
+    plan = planner.plan(HOME, [sol], rec.planned, 1, pose)
+    assert plan.path is not None, plan.why
+    assert "goal moved clear of -30 mm (branch)" in plan.why
+    end = plan.path[-1]
+    assert planner.space.clearance(end).obstacles_m >= s.plan_goal_margin_m - 1e-3
+    assert np.abs(end - sol.q_rad).max() > 0.2  # the arm is elsewhere ...
+    planner.space.robot.set_q(end)
+    tip = planner.space.robot.T_world(TOOL_FRAME["cutter"])[:3, 3]
+    assert np.linalg.norm(tip - pose.tip_world_m) < s.reach_tolerance_m  # ... the tools are not
+
+
+def test_a_fruit_the_controller_ignores_is_no_obstacle_to_the_plan() -> None:
+    """A harvested fruit the scene still lists where it hung (a ghost) is ignored by the
+    controller; a plan that avoided it went round nothing (paper-exp1 seed 0: a ghost 3 mm from
+    the dish at the start of every plan)."""
+    core = planned_core()
+    s, rec = core.machine.s, core.book.records[1]
+    planner = ApproachPlanner(s.model_copy(update={"plan_max_checks": 50}))
+    planner.space.robot.set_q(HOME)
+    tip = planner.space.robot.T_world(TOOL_FRAME["cutter"])[:3, 3]
+    ghost = EllipsoidObstacle(
+        name="fruit_7", fruit_id=7, center_world_m=tuple(tip), semi_axes_m=(0.3, 0.3, 0.3)
+    )
+    planner.obstacles = Obstacles(ellipsoids=(ghost,))
+    goal = pre_pose_joints(core)
+    assert planner.plan(HOME, ik(goal), rec.planned, 1).path is None
+    plan = planner.plan(HOME, ik(goal), rec.planned, 1, ignore_fruit_ids=(7,))
+    assert plan.path is not None and "clear at the start" in plan.why
 
 
 def run(core: PlannerCore, until_s: float) -> list[Goal]:
