@@ -243,6 +243,23 @@ class Settings(ServiceSettings):
         description="A voxel not hit for this many frames is forgotten (15 Hz: 60 s); hidden "
         "voxels (behind an arm) are kept until then.",
     )
+    occupancy_history_frames: int = Field(
+        default=15,
+        ge=0,
+        description="A voxel born where one of this many recent frames saw depth behind it is a "
+        "newcomer: something moved into free space (a hand). 0: none is.",
+    )
+    occupancy_transient_forget_frames: int = Field(
+        default=5,
+        ge=1,
+        description="A newcomer is forgotten this many frames after its last hit, hidden or not.",
+    )
+    occupancy_settle_hits: int = Field(
+        default=45,
+        ge=1,
+        description="… unless it was hit in this many frames (it stayed): then it is kept like "
+        "a branch seen from the start.",
+    )
     occupancy_max_obstacles: int = Field(
         default=200,
         ge=0,

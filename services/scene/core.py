@@ -113,6 +113,9 @@ class SceneCore:
                     clear_margin_m=s.occupancy_clear_margin_m,
                     forget_after_frames=s.occupancy_forget_after_frames,
                     max_obstacles=s.occupancy_max_obstacles,
+                    history_frames=s.occupancy_history_frames,
+                    transient_forget_frames=s.occupancy_transient_forget_frames,
+                    settle_hits=s.occupancy_settle_hits,
                 )
             )
             if s.occupancy

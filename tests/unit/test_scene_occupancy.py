@@ -136,6 +136,64 @@ def test_a_hand_gone_is_forgotten_when_the_background_is_beyond_the_depth_limit(
     assert grid.obstacles() == ()
 
 
+def scene_of(*rects: tuple[float, tuple[int, int, int, int], tuple[int, int, int]]) -> Scene:
+    """Fronto-parallel rectangles (depth m, (u0, u1, v0, v1), colour), nearest in front."""
+    sc = Scene()
+    for z, (u0, u1, v0, v1), colour in rects:
+        sc.plane_rect(z, u0, u1, v0, v1, colour=colour)
+    return sc
+
+
+WALL = (1.4, (0, K.width, 0, K.height), (200, 200, 200))  # a grey background within range
+ARM = (0.3, (250, 400, 20, 460), (120, 120, 120))  # in front of the strip
+
+
+def test_a_hand_that_swept_past_is_forgotten_though_an_arm_hides_where_it_was() -> None:
+    """Skin falls in the bark HSV box. The hand moved into space the camera saw through: it is
+    an obstacle while seen, then forgotten, also where an arm now hides the spot (paper-exp1:
+    the voxels of the hand held a cutter elbow 25 cm from any branch)."""
+    grid = OccupancyGrid(P)
+    before, hand, hidden = scene_of(WALL), scene_of(WALL, (0.8, BRANCH, BARK)), scene_of(WALL, ARM)
+    for sc in (before, before, hand, hand, hand):
+        grid.step(bark_mask(sc), sc.depth, K, T, ())
+    assert len(grid.obstacles()) > 0  # an obstacle while it is there
+    for _ in range(P.transient_forget_frames):
+        grid.step(bark_mask(hidden), hidden.depth, K, T, ())
+    assert len(grid.obstacles()) > 0
+    grid.step(bark_mask(hidden), hidden.depth, K, T, ())
+    assert grid.obstacles() == ()
+
+
+def test_a_branch_seen_from_the_start_or_uncovered_stays_where_an_arm_hides_it() -> None:
+    """A branch is never seen through before it is seen: there from the first frame, or
+    uncovered by a leaf that swung away, it is remembered behind the arm."""
+    branch = scene_of(WALL, (0.8, BRANCH, BARK))
+    leaf = scene_of(WALL, (0.8, BRANCH, BARK), (0.6, BRANCH, LEAF))
+    hidden = scene_of(WALL, ARM)
+    for frames in ([branch], [leaf, leaf, branch]):
+        grid = OccupancyGrid(P)
+        for sc in frames:
+            grid.step(bark_mask(sc), sc.depth, K, T, ())
+        n = len(grid.obstacles())
+        assert n > 0
+        for _ in range(3 * P.transient_forget_frames):
+            grid.step(bark_mask(hidden), hidden.depth, K, T, ())
+        assert len(grid.obstacles()) == n
+
+
+def test_what_moved_in_and_stayed_is_kept_like_a_branch() -> None:
+    grid = OccupancyGrid(P)
+    before, there = scene_of(WALL), scene_of(WALL, (0.8, BRANCH, BARK))
+    hidden = scene_of(WALL, ARM)
+    grid.step(bark_mask(before), before.depth, K, T, ())
+    for _ in range(P.settle_hits):
+        grid.step(bark_mask(there), there.depth, K, T, ())
+    n = len(grid.obstacles())
+    for _ in range(3 * P.transient_forget_frames):
+        grid.step(bark_mask(hidden), hidden.depth, K, T, ())
+    assert n > 0 and len(grid.obstacles()) == n
+
+
 # ---- in the scene core --------------------------------------------------------------------
 def run_core(sc: Scene, boxes: dict[int, tuple], **settings: object):  # type: ignore[no-untyped-def]
     core = SceneCore(load_settings(Settings, {"robot_self_filter": False, **settings}))
