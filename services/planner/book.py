@@ -186,15 +186,19 @@ class FruitBook:
         return key
 
     def _reused(self, rec: FruitRecord, f: Fruit, in_dish: InDish) -> bool:
-        """``f`` (an ID of ``rec``) is fresh and far from ``rec``'s fruit, which is finished or
-        has a newer ID, and not in our dish (a harvested fruit is seen there): the tracker gave
-        the ID to another fruit. Only an estimate of this frame counts: the scene keeps the
-        last one when a view gives none (``depth_inconsistent`` …), and a harvested fruit's
-        kept estimate from mid-fall lies outside the dish (paper-exp1 seed 11, planned: the
-        fruit in the basket was taken for a new one and the approach to it stalled)."""
-        if not _this_frames(f) or not (rec.finished or f.fruit_id != rec.fruit_id):
+        """``f`` (an ID of ``rec``) is fresh and far from ``rec``'s fruit, which is finished, in
+        the basket or has a newer ID, and not in our dish (a harvested fruit is seen there): the
+        tracker gave the ID to another fruit (paper-exp1 seed 4, planned: the track first seen
+        on a harvested fruit falling into the dish went on to the fruit a hand had moved; that
+        fruit was never a candidate, "in the basket"). Only an estimate of this frame counts:
+        the scene keeps the last one when a view gives none (``depth_inconsistent`` …), and a
+        harvested fruit's kept estimate from mid-fall lies outside the dish (paper-exp1 seed
+        11, planned: the fruit in the basket was taken for a new one and the approach to it
+        stalled). A fruit known to be in the basket may show its top above the rim."""
+        done = rec.finished or rec.in_basket
+        if not _this_frames(f) or not (done or f.fruit_id != rec.fruit_id):
             return False  # a kept estimate (a fruit mid-fall, say) is no evidence
-        if in_dish(f, rec.outcome == "harvested"):
+        if in_dish(f, rec.outcome == "harvested" or rec.in_basket):
             return False
         p = np.array(f.position_world_m, float)
         c = rec.planned.centre_world_m

@@ -96,7 +96,7 @@ def test_fruit_seen_in_the_dish_and_stale_fruit_are_not_candidates() -> None:
                 fruit(5, (0.5, -0.1, 0.9)),
                 fruit(6, (0.7, 0, 1.4), unseen),
             ),
-            lambda f: f.fruit_id in in_dish,
+            lambda f, resting=False: f.fruit_id in in_dish,
         )
     assert [r.key for r in b.candidates(45)] == [4]
     assert [r.key for r in b.detected()] == [4, 6]
@@ -202,6 +202,29 @@ def test_an_old_id_seen_on_another_fruit_does_not_take_the_target_there() -> Non
         b.update(scene(fruit(5, (0.82, -0.30, 1.23)), fruit(53, (0.70, -0.24, 1.39))), never)
     assert b.records[5].fruit_id == 53 and b.records[5].ids == [53] and b.switches == []
     assert b.records[-1].fruit_id == 5 and [r.key for r in b.candidates(45)] == [-1, 5]
+
+
+def test_the_id_of_a_fruit_seen_in_the_basket_seen_on_a_fruit_on_the_tree_is_a_new_fruit() -> None:
+    # paper-exp1 seed 4, planned: a new track on the harvested fruit as it fell into the dish
+    # was marked in the basket; the tracker then put it on the fruit a hand had moved, 30 cm
+    # away, and that fruit was never a candidate. Seen by its top above the rim it stays.
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    dish = (0.84, 0.14, 1.5)
+
+    def in_dish(f: Fruit, resting: bool = False) -> bool:
+        d = np.subtract(f.position_world_m, dish)
+        over = bool(np.hypot(d[0], d[1]) < 0.05 and d[2] < 0.06)  # in the dish or just above
+        return bool(np.linalg.norm(d) < 0.03) or (resting and over)
+
+    b.update(scene(fruit(15, dish)), in_dish)
+    assert b.records[15].in_basket and b.candidates(45) == []
+    b.update(scene(fruit(15, (0.85, 0.15, 1.545))), in_dish)  # its top above the rim
+    assert sorted(b.records) == [15]
+    tree = fruit(15, (0.695, -0.02, 1.244))
+    for _ in range(MIN_SIGHTINGS):
+        b.update(scene(tree), in_dish)
+    assert sorted(b.records) == [-1, 15] and b.candidates(45) == [b.records[-1]]
+    assert b.records[15].in_basket and b.records[15].ids == []
 
 
 def test_a_harvested_fruit_seen_in_the_dish_or_a_dropped_one_seen_fallen_is_not_new() -> None:
