@@ -103,8 +103,9 @@ class ApproachPlanner:
         """The clearest goal, and what the reason adds when it was moved clear. Goals closer
         than the path's margin are first moved clear (``GoalClearer``), where a clearer is set."""
         clearance = self.space.clearance
-        best = max(goals, key=lambda g: clearance(g.q_rad).obstacles_m)
-        before = clearance(best.q_rad)
+        before, best = max(
+            ((clearance(g.q_rad), g) for g in goals), key=lambda cg: cg[0].obstacles_m
+        )
         if self.clearer is None or pose is None or before.obstacles_m >= self.s.plan_margin_m:
             return best.q_rad, ""
         moved = []

@@ -73,6 +73,10 @@ class RigidTransform:
         """Camera-frame point(s) (..., 3) → world frame (..., 3)."""
         return np.asarray(p_cam_m) @ self.R.T + self.t_m
 
+    def to_camera(self, p_world_m: np.ndarray) -> np.ndarray:
+        """World-frame point(s) (..., 3) → camera frame (..., 3)."""
+        return (np.asarray(p_world_m) - self.t_m) @ self.R
+
 
 def vec3(p: np.ndarray) -> tuple[float, float, float]:
     """A numpy 3-vector as the schemas' Vec3 (plain floats)."""

@@ -122,11 +122,11 @@ class OccupancyGrid:
         is there now moved in (a hand; a branch is never seen through, only hidden)."""
         s = self.p.stride_px
         for depth, K, T in self.history:
-            c = (c_world - T.t_m) @ T.R
+            c = T.to_camera(c_world)
             if c[2] <= 1e-3:
                 continue
-            u = round((K.fx * c[0] / c[2] + K.cx) / s)
-            v = round((K.fy * c[1] / c[2] + K.cy) / s)
+            u_px, v_px = K.project(c)
+            u, v = round(u_px / s), round(v_px / s)
             inside = 0 <= v < depth.shape[0] and 0 <= u < depth.shape[1]
             if inside and depth[v, u] > c[2] + self.p.clear_margin_m:
                 return True
@@ -164,7 +164,7 @@ class OccupancyGrid:
         if not self.voxels:
             return
         keys = list(self.voxels)
-        c_cam = (np.array([self.voxels[k].center_m for k in keys]) - T.t_m) @ T.R
+        c_cam = T.to_camera(np.array([self.voxels[k].center_m for k in keys]))
         z = c_cam[:, 2]
         front = z > 1e-3
         u = np.full(len(keys), -1)
