@@ -104,6 +104,13 @@ class Settings(ServiceSettings):
         "(the controller's fruit dampers): a fruit (d_h ≤ 5 cm) still falls into the 8.5 cm "
         "dish. Cut once the dish has settled (no progress for settle_s), m.",
     )
+    stalled_cut_tolerance_m: float = Field(
+        default=0.012,
+        ge=0,
+        description="A harvest held back this close to its pose (cutter position error) when it "
+        "stops making progress is cut there instead of given up: the sim's shears cut within "
+        "15 mm of the peduncle. 0 turns this off, m.",
+    )
     settle_s: float = Field(
         default=0.3, gt=0, description="No progress this long: the tools have settled, s."
     )

@@ -317,18 +317,28 @@ class Machine:
         exact = self._reached(st, self.s.harvest_tolerance_m)
         held = self._reached(st, self.s.harvest_tolerance_m, self.s.catch_tolerance_m)
         if exact or (held and self.progress.stuck(now, self.s.settle_s)):
-            rec.cuts += 1
-            rec.frozen = True  # the estimate of a falling fruit must not move the target
-            self.cut = CutState(
-                now, basket if basket is not None else 0, rec.planned.centre_world_m.copy()
-            )
-            self.tools.append(("cut", rec.fruit_id))
-            self.events.append(
-                Event("cut_sent", rec.fruit_id, reason=f"cut {rec.cuts}/{self.s.max_cut_attempts}")
-            )
-            self._enter("cut", now)
+            self._send_cut(rec, now, basket, "")
+            return
+        # Held back short of the pose (a neighbour's or a branch's damper) at the moment the
+        # attempt would be given up, but within the shears' reach: cut there rather than lose
+        # the fruit; a miss is a failed cut like any other (retried once).
+        near = self._reached(st, self.s.stalled_cut_tolerance_m, self.s.catch_tolerance_m)
+        if near and self.progress.stuck(now, self.s.no_progress_s):
+            err_mm = st.abs_position_error_m * 1e3
+            self._send_cut(rec, now, basket, f" (held {err_mm:.0f} mm short of the pose)")
             return
         self._check_stuck(now, self.s.harvest_timeout_s, leave=True)
+
+    def _send_cut(self, rec: FruitRecord, now: int, basket: int | None, note: str) -> None:
+        rec.cuts += 1
+        rec.frozen = True  # the estimate of a falling fruit must not move the target
+        self.cut = CutState(
+            now, basket if basket is not None else 0, rec.planned.centre_world_m.copy()
+        )
+        self.tools.append(("cut", rec.fruit_id))
+        why = f"cut {rec.cuts}/{self.s.max_cut_attempts}{note}"
+        self.events.append(Event("cut_sent", rec.fruit_id, reason=why))
+        self._enter("cut", now)
 
     def _cut(self, now: int, st: ControlStatus, basket: int | None) -> None:
         rec, cut = self.target, self.cut
