@@ -317,7 +317,7 @@ class Machine:
         exact = self._reached(st, self.s.harvest_tolerance_m)
         held = self._reached(st, self.s.harvest_tolerance_m, self.s.catch_tolerance_m)
         if exact or (held and self.progress.stuck(now, self.s.settle_s)):
-            self._send_cut(rec, now, basket, "")
+            self._send_cut(rec, now, basket)
             return
         # Held back short of the pose (a neighbour's or a branch's damper) at the moment the
         # attempt would be given up, but within the shears' reach: cut there rather than lose
@@ -329,7 +329,8 @@ class Machine:
             return
         self._check_stuck(now, self.s.harvest_timeout_s, leave=True)
 
-    def _send_cut(self, rec: FruitRecord, now: int, basket: int | None, note: str) -> None:
+    def _send_cut(self, rec: FruitRecord, now: int, basket: int | None, note: str = "") -> None:
+        """Close the shears on ``rec`` (``note``: what the cut_sent reason adds)."""
         rec.cuts += 1
         rec.frozen = True  # the estimate of a falling fruit must not move the target
         self.cut = CutState(
