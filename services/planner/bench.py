@@ -250,19 +250,31 @@ def run_stack(
 @dataclass
 class Truth:
     """Per sim fruit: whether it can be harvested at all (see ``truth_reachability``), and why
-    not."""
+    not ("IK", "branch", "blocked"); ``reachable_ik`` is the judgement without the branches
+    (IK and the fruit in the tools' way only: the definition up to 2026-11-25)."""
 
     reachable: dict[int, bool]
     why: dict[int, str]
+    reachable_ik: dict[int, bool] = field(default_factory=dict)
 
 
-def truth_reachability(truth: GroundTruth, planner_settings: dict[str, Any]) -> Truth:
+# The robot (all joints, arm order) would touch a tree body: the sim's own collision test.
+TouchesTree = Callable[[np.ndarray], bool]
+
+
+def truth_reachability(
+    truth: GroundTruth,
+    planner_settings: dict[str, Any],
+    touches_tree: TouchesTree | None = None,
+) -> Truth:
     """A fruit is reachable when the IK reaches its harvest pose and pre-pose (true centre and
-    semi-axes) and there is an order in which every fruit in its tools' way is harvested before
-    it (``clutter.blockers`` with the planner's clearance; fixpoint from the free ones)."""
+    semi-axes), some IK solution of each (the planner's sampled cutter yaws) keeps the robot off
+    the trunk and branches (``touches_tree``: the sim's collision model; a dish or cutter
+    that can only be put through a branch harvests with a collision), and there is an order in
+    which every fruit in its tools' way is harvested before it (``clutter.blockers`` with the
+    planner's clearance; fixpoint from the free ones)."""
     from services.planner import SERVICE as PLAN
     from services.planner import Settings as PlannerSettings
-    from services.planner.clutter import blockers
     from services.planner.core import PlannerCore
     from services.planner.poses import FruitShape, harvest_pose, pre_pose
     from services.runtime.settings import load_settings
@@ -277,29 +289,51 @@ def truth_reachability(truth: GroundTruth, planner_settings: dict[str, Any]) -> 
     }
     why: dict[int, str] = {}
     ik_ok: set[int] = set()
+    tree_ok: set[int] = set()
     for i, shape in shapes.items():
-        h, p = harvest_pose(shape, ps), pre_pose(shape, ps)
-        if core.kin.reach(h.tip_world_m, h.basket_below_m).reachable and (
-            core.kin.reach(p.tip_world_m, p.basket_below_m).reachable
-        ):
-            ik_ok.add(i)
-        else:
+        poses = (harvest_pose(shape, ps), pre_pose(shape, ps))
+        if not all(core.kin.reach(p.tip_world_m, p.basket_below_m).reachable for p in poses):
             why[i] = "IK"
+            continue
+        ik_ok.add(i)
+        if touches_tree is None or all(
+            any(
+                not touches_tree(s.q_rad)
+                for s in core.kin.solutions(p.tip_world_m, p.basket_below_m)
+            )
+            for p in poses
+        ):
+            tree_ok.add(i)
+        else:
+            why[i] = "branch"
+    clear_ik = _clear_order(ik_ok, shapes, ps, settings.neighbour_clearance_m)
+    clear = _clear_order(tree_ok, shapes, ps, settings.neighbour_clearance_m)
+    for i in sorted(tree_ok - clear):
+        why[i] = "blocked"
+    return Truth(
+        {i: i in clear for i in sorted(shapes)},
+        why,
+        {i: i in clear_ik for i in sorted(shapes)},
+    )
+
+
+def _clear_order(
+    candidates: set[int], shapes: dict[int, Any], ps: Any, clearance_m: float
+) -> set[int]:
+    """The candidates that some order frees: fixpoint from those with no fruit in their tools'
+    way, every other fruit (candidate or not) an obstacle until it is freed."""
+    from services.planner.clutter import blockers
+
     done: set[int] = set()
     changed = True
     while changed:
         changed = False
-        for i in sorted(ik_ok - done):
+        for i in sorted(candidates - done):
             others = [k for k in sorted(shapes) if k != i and k not in done]
-            hit = blockers(
-                shapes[i], [shapes[k] for k in others], ps, settings.neighbour_clearance_m
-            )
-            if not hit:
+            if not blockers(shapes[i], [shapes[k] for k in others], ps, clearance_m):
                 done.add(i)
                 changed = True
-    for i in sorted(ik_ok - done):
-        why[i] = "blocked"
-    return Truth({i: i in done for i in sorted(shapes)}, why)
+    return done
 
 
 def _sim_fruit(p: Any, centres: dict[int, np.ndarray]) -> int | None:
@@ -441,12 +475,10 @@ def approach_plans(events: Sequence[Any]) -> dict[str, int]:
     }
 
 
-def evaluate(
-    got: Collected, first_truth: GroundTruth, planner_settings: dict[str, Any]
-) -> dict[str, Any]:
-    """Figures of one run against the truth (the first frame's fruit, before any cut)."""
+def evaluate(got: Collected, first_truth: GroundTruth, judged: Truth) -> dict[str, Any]:
+    """Figures of one run against the truth (the first frame's fruit, before any cut, and
+    ``judged`` on it: ``first_frame``)."""
     s, last = got.summary, got.truth
-    judged = truth_reachability(first_truth, planner_settings)
     reach = judged.reachable
     centres = {f.fruit_id: np.array(f.position_world_m) for f in first_truth.fruits}
     outcome: dict[int, str] = {}  # sim fruit → the planner's outcome
@@ -469,6 +501,7 @@ def evaluate(
         if r.outcome == "harvested" and r.duration_s is not None
     ]
     harvested_reachable = len(collected & set(reachable))
+    reachable_ik = {i for i, ok in judged.reachable_ik.items() if ok}
     counters = last.counters if last is not None else None
     return {
         "fruit": len(reach),
@@ -480,6 +513,9 @@ def evaluate(
         "success_rate": harvested_reachable / len(reachable) if reachable else 1.0,
         "unreachable_true": len(unreachable),
         "unreachable_blocked": sum(1 for i in unreachable if judged.why.get(i) == "blocked"),
+        "unreachable_branch": sum(1 for i in unreachable if judged.why.get(i) == "branch"),
+        "reachable_ik": len(reachable_ik),
+        "harvested_reachable_ik": len(collected & reachable_ik),
         "unreachable_reported": len(reported_unreachable),
         "unreachable_correct": len(reported_unreachable & set(unreachable)),
         "reachable_called_unreachable": len(reported_unreachable - set(unreachable)),
@@ -532,7 +568,7 @@ def run_harvest_bench(
                 )
             row = {"order": order, "seed": seed, "sim_s": round(sim_t, 3), "wall_s": round(wall, 2)}
             row["rtf"] = round(sim_t / wall, 3) if wall > 0 else None
-            row.update(evaluate(got, _first_truth(sim_s), plan_s))
+            row.update(evaluate(got, *first_frame(sim_s, plan_s)))
             runs.append(row)
             if progress is not None:
                 progress(
@@ -551,8 +587,9 @@ def run_harvest_bench(
     }
 
 
-def _first_truth(sim_s: dict[str, Any]) -> GroundTruth:
-    """The truth of the scenario's first frame (every fruit on the tree), from a fresh sim."""
+def first_frame(sim_s: dict[str, Any], plan_s: dict[str, Any]) -> tuple[GroundTruth, Truth]:
+    """The truth of the scenario's first frame (every fruit on the tree), from a fresh sim, and
+    the fruit judged on it with that sim's collision model (``truth_reachability``)."""
     from services.runtime.settings import load_settings
     from services.sim import SERVICE as SIM
 
@@ -560,7 +597,9 @@ def _first_truth(sim_s: dict[str, Any]) -> GroundTruth:
     sim = SIM.make_core(load_settings(SIM.settings, sim_s))
     try:
         (group, *_rest) = sim.emit()
-        return next(m for t, m in group if t == "sim/truth")
+        truth = next(m for t, m in group if t == "sim/truth")
+        physics = sim.physics
+        return truth, truth_reachability(truth, plan_s, lambda q: bool(physics.tree_contacts_at(q)))
     finally:
         sim.close()
 
@@ -580,6 +619,9 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "harvested_reachable",
             "unreachable_true",
             "unreachable_blocked",
+            "unreachable_branch",
+            "reachable_ik",
+            "harvested_reachable_ik",
             "unreachable_reported",
             "unreachable_correct",
             "reachable_called_unreachable",
@@ -601,6 +643,9 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "runs": len(rows),
         "reachable_fates": {k: sum(r["reachable_fates"].get(k, 0) for r in rows) for k in FATES},
         "success_rate": tot["harvested_reachable"] / tot["reachable"] if tot["reachable"] else 1.0,
+        "success_rate_ik": (
+            tot["harvested_reachable_ik"] / tot["reachable_ik"] if tot["reachable_ik"] else 1.0
+        ),
         "unreachable_identified": (
             tot["unreachable_correct"] / tot["unreachable_true"] if tot["unreachable_true"] else 1.0
         ),
@@ -622,6 +667,9 @@ def table(result: dict[str, Any]) -> str:
         ("unreachable_correct", "unreachable identified"),
         ("unreachable_true", "unreachable (truth)"),
         ("unreachable_blocked", "  of which blocked by fruit"),
+        ("unreachable_branch", "  of which only reached through a branch"),
+        ("harvested_reachable_ik", "harvested of the reachable without the branch check"),
+        ("reachable_ik", "reachable without the branch check"),
         ("reachable_called_unreachable", "reachable called unreachable"),
         ("dropped", "dropped"),
         ("collisions", "collisions (robot contacts, target excluded)"),

@@ -181,6 +181,23 @@ class Physics:
         }
         return sorted(pairs)
 
+    def tree_contacts_at(self, q: np.ndarray) -> list[tuple[str, str]]:
+        """(robot link, tree body) pairs that would touch with the joints at ``q``
+        (all_joint_names order, rad): the contacts the sim would count there, for judging a
+        posture (the bench's truth). The joints are reset to ``q`` at rest: use it on a sim that
+        is not stepping, or set the robot again before the next step."""
+        pb, c = self.pb, self.cid
+        for j, a in zip(self.joint_ids, q, strict=True):
+            pb.resetJointState(self.robot, j, float(a), 0.0, physicsClientId=c)
+        hull = self.link[BASKET_HULL]  # collides with nothing (see __init__)
+        pairs = {
+            (self.link_name[cp[3]], self.names[body])
+            for body in self.tree_bodies
+            for cp in pb.getClosestPoints(self.robot, body, TOUCH_M, physicsClientId=c)
+            if cp[3] != hull
+        }
+        return sorted(pairs)
+
     # ---- fruit -----------------------------------------------------------------------------
     def place_fruit(self, i: int, pos: np.ndarray, quat: tuple = (0, 0, 0, 1)) -> None:
         self.pb.resetBasePositionAndOrientation(
