@@ -112,6 +112,12 @@ class SceneState(Message):
     selected_fruit_id: int | None = Field(
         default=None, description="Nearest fruit neither harvested nor unreachable, if any."
     )
+    spheres_near_selected: tuple[SphereObstacle, ...] = Field(
+        default=(),
+        description="Occupied space (as obstacles.spheres) within the selected fruit's keep-out, "
+        "left out of the obstacles (the tools must reach the fruit past its own branch): for "
+        "checking a fruit's tool poses against every branch seen, never for the dampers.",
+    )
     input_problem: str = Field(
         default="",
         description="Why this Tracks message could not be used ('' when it was), e.g. its "

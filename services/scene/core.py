@@ -32,7 +32,7 @@ from schemas.camera import RgbdFrame
 from schemas.harvest import HarvestEvent
 from schemas.perception import Tracks
 from schemas.robot import JointState
-from schemas.scene import Fruit, FruitFlag, SceneState, Trunk
+from schemas.scene import Fruit, FruitFlag, SceneState, SphereObstacle, Trunk
 from services.robot.clearance import Capsule, RobotBody, axis_distances_m
 from services.runtime import ConfigError, Output, Stamper
 from services.scene import Settings
@@ -374,16 +374,20 @@ class SceneCore:
             self.s.trunk_default_radius_m,
             self.s.trunk_tool_margin_m,
         )
+        near: tuple[SphereObstacle, ...] = ()
         if self.occupancy is not None:
+            keep_out = self._keep_out(selected)
             obstacles = obstacles.model_copy(
-                update={"spheres": self.occupancy.obstacles(*self._keep_out(selected))}
+                update={"spheres": self.occupancy.obstacles(*keep_out)}
             )
+            near = self.occupancy.within(*keep_out)
         return SceneState(
             header=self.stamper.answer(TOPIC_OUT, tracks.header, frame_id="world"),
             fruits=fruits,
             trunk=self._trunk(),
             obstacles=obstacles,
             selected_fruit_id=selected_id,
+            spheres_near_selected=near,
             input_problem=problem,
         )
 

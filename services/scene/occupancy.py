@@ -210,6 +210,31 @@ class OccupancyGrid:
             for i, (_f, _k, c) in enumerate(kept[: self.p.max_obstacles])
         )
 
+    def within(
+        self,
+        keep_out: Sequence[tuple[np.ndarray, float]],
+        inside_cylinder: tuple[np.ndarray, float] | None = None,
+    ) -> tuple[SphereObstacle, ...]:
+        """The spheres ``obstacles`` leaves out for the keep-out spheres (those inside the
+        trunk cylinder stay out: the trunk guards them), the most recently hit first, at most
+        ``max_obstacles``: every branch seen near the selected fruit, for checking tool poses."""
+        r = self.p.sphere_radius_m
+        kept: list[tuple[int, tuple[int, int, int], np.ndarray]] = []
+        for key, vox in self.voxels.items():
+            c = vox.center_m
+            if not any(float(np.linalg.norm(c - k)) < kr + r for k, kr in keep_out):
+                continue
+            if inside_cylinder is not None:
+                axis, radius = inside_cylinder
+                if float(np.hypot(c[0] - axis[0], c[1] - axis[1])) < radius:
+                    continue
+            kept.append((-vox.last_hit_frame, key, c))
+        kept.sort(key=lambda t: (t[0], t[1]))
+        return tuple(
+            SphereObstacle(name=f"near_{i}", center_world_m=vec3(c), radius_m=r)
+            for i, (_f, _k, c) in enumerate(kept[: self.p.max_obstacles])
+        )
+
 
 def _points_world(
     mask: np.ndarray, depth_m: np.ndarray, K: Pinhole, T: RigidTransform, stride_px: int
