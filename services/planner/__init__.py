@@ -114,6 +114,19 @@ class Settings(ServiceSettings):
     settle_s: float = Field(
         default=0.3, gt=0, description="No progress this long: the tools have settled, s."
     )
+    branch_check: bool = Field(
+        default=False,
+        description="Before committing to a fruit, refuse it as unreachable when every IK "
+        "solution of its harvest pose, or of its pre-pose, puts the robot more than "
+        "branch_check_depth_m into the occupied space the scene has seen (branchcheck.py).",
+    )
+    branch_check_depth_m: float = Field(
+        default=0.01,
+        ge=0,
+        le=0.1,
+        description="… how far into the occupied spheres (a voxel's branch points, inflated by "
+        "the sphere radius) the clearest solution may go, m.",
+    )
     neighbour_clearance_m: float = Field(
         default=0.0,
         ge=0,

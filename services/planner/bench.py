@@ -406,6 +406,7 @@ FATE_RULES: tuple[tuple[str, str, str], ...] = (
     ("unreachable", "harvest timed out", "stalled_harvest"),
     ("unreachable", "blocked by", "blocked"),
     ("unreachable", "out of reach", "out_of_reach"),
+    ("unreachable", "a branch in the tools' way", "branch_refused"),
     ("cut_failed", "", "cut_failed"),
     ("dropped", "", "dropped"),
     ("lost", "", "lost"),

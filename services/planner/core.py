@@ -53,6 +53,10 @@ class PlannerCore:
                 s.dish_catch_margin_m,
             ),
         )
+        if s.branch_check:
+            from services.planner.branchcheck import BranchCheck
+
+            self.machine.branches = BranchCheck(s.branch_check_depth_m)
         if s.plan_approach != "off":
             from services.planner.motion import ApproachPlanner
 
@@ -161,6 +165,8 @@ class PlannerCore:
         now = st.header.stamp_ns
         if self.pending_scene is not None:
             self.book.update(self.pending_scene, self._in_dish)
+            if self.machine.branches is not None:
+                self.machine.branches.set_scene(self.pending_scene)
             if self.machine.motion is not None:
                 self.machine.motion.obstacles = self.pending_scene.obstacles
                 self.machine.motion.trunk = self.pending_scene.trunk

@@ -37,6 +37,7 @@ from schemas.control import ControlStatus, HarvestPhase
 from schemas.harvest import FruitOutcome, HarvestEventKind
 from services.planner import Settings
 from services.planner.book import FruitBook, FruitRecord
+from services.planner.branchcheck import BranchCheck
 from services.planner.clutter import blockers, clearable, same_fruit
 from services.planner.kinematics import Kinematics
 from services.planner.motion import ApproachPlanner
@@ -129,6 +130,7 @@ class Machine:
     retrace_touching: bool = False  # the stall was in the harvest: the target may be touched
     left_because: str = ""  # the reason the next phase change carries (how a retrace ended)
     motion: ApproachPlanner | None = None  # plan_approach: planned joint paths to the pre-pose
+    branches: BranchCheck | None = None  # branch_check: tool poses against the branches seen
     following: bool = False  # ``retrace`` is the planned approach path, not a way back
     replans_left: int = 0  # planned paths still allowed this attempt after one was left
     planned_after_stall: bool = False  # this attempt's stalled approach got its planned path
@@ -622,20 +624,27 @@ class Machine:
         rec.finished_ns = now
 
     def _check_reach(self, rec: FruitRecord, now: int) -> bool:
-        """IK of the harvest pose and the pre-pose (cached); unreachable: skipped now."""
+        """IK of the harvest pose and the pre-pose (cached), then (``branch_check``) their IK
+        solutions against the branches seen now; unreachable: skipped now."""
+        h = harvest_pose(rec.planned, self.pose_settings)
+        p = pre_pose(rec.planned, self.pose_settings)
         if rec.reach is None:
-            h = harvest_pose(rec.planned, self.pose_settings)
-            p = pre_pose(rec.planned, self.pose_settings)
             rec.reach = (
                 self.kin.reach(h.tip_world_m, h.basket_below_m),
                 self.kin.reach(p.tip_world_m, p.basket_below_m),
             )
         hv, pv = rec.reach
         if hv.reachable and pv.reachable:
-            return True
-        which = "harvest pose" if not hv.reachable else "pre-pose"
-        bad = hv if not hv.reachable else pv
-        why = f"unreachable: {which} out of reach ({bad.why()})"
+            if self.branches is None:
+                return True
+            verdict = self.branches.check(self.kin, [("harvest pose", h), ("pre-pose", p)])
+            if verdict.clear:
+                return True
+            why = f"unreachable: {verdict.why()}"
+        else:
+            which = "harvest pose" if not hv.reachable else "pre-pose"
+            bad = hv if not hv.reachable else pv
+            why = f"unreachable: {which} out of reach ({bad.why()})"
         self.events.append(Event("fruit_skipped", rec.fruit_id, outcome="unreachable", reason=why))
         self._finish(rec, now, "unreachable", why)
         rec.finished_ns = now  # never attempted

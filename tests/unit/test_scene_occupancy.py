@@ -77,6 +77,20 @@ def test_nothing_within_the_keep_out_sphere_and_the_cylinder() -> None:
     assert len(centres(grid, inside_cylinder=(mid, 0.5))) == 0
 
 
+def test_the_keep_out_hands_its_spheres_over_to_within() -> None:
+    sc = branch_scene()
+    grid = OccupancyGrid(P)
+    grid.step(bark_mask(sc), sc.depth, K, T, ())
+    lo, hi = strip_world_box()
+    keep_out = [((lo + hi) / 2, 0.05)]
+    out = {s.center_world_m for s in grid.obstacles(keep_out)}
+    near = {s.center_world_m for s in grid.within(keep_out)}
+    assert near and not (out & near)  # one or the other, never both
+    assert out | near == {s.center_world_m for s in grid.obstacles()}  # together: all of it
+    assert grid.within(keep_out, inside_cylinder=(keep_out[0][0], 0.5)) == ()  # trunk's own
+    assert grid.within([]) == ()
+
+
 def test_the_count_is_capped_to_the_most_recently_hit() -> None:
     sc = branch_scene()
     grid = OccupancyGrid(OccupancyParams(stride_px=2, max_obstacles=3))
