@@ -193,22 +193,7 @@ class OccupancyGrid:
         ((centre, radius), m: the selected fruit's working space) or whose centre is inside the
         vertical cylinder ``inside_cylinder`` ((axis point, radius), m: the trunk obstacle,
         which already guards that space)."""
-        r = self.p.sphere_radius_m
-        kept: list[tuple[int, tuple[int, int, int], np.ndarray]] = []
-        for key, vox in self.voxels.items():
-            c = vox.center_m
-            if any(float(np.linalg.norm(c - k)) < kr + r for k, kr in keep_out):
-                continue
-            if inside_cylinder is not None:
-                axis, radius = inside_cylinder
-                if float(np.hypot(c[0] - axis[0], c[1] - axis[1])) < radius:
-                    continue
-            kept.append((-vox.last_hit_frame, key, c))
-        kept.sort(key=lambda t: (t[0], t[1]))
-        return tuple(
-            SphereObstacle(name=f"occupied_{i}", center_world_m=vec3(c), radius_m=r)
-            for i, (_f, _k, c) in enumerate(kept[: self.p.max_obstacles])
-        )
+        return self._spheres("occupied", False, keep_out, inside_cylinder)
 
     def within(
         self,
@@ -218,11 +203,22 @@ class OccupancyGrid:
         """The spheres ``obstacles`` leaves out for the keep-out spheres (those inside the
         trunk cylinder stay out: the trunk guards them), the most recently hit first, at most
         ``max_obstacles``: every branch seen near the selected fruit, for checking tool poses."""
+        return self._spheres("near", True, keep_out, inside_cylinder)
+
+    def _spheres(
+        self,
+        name: str,
+        in_keep_out: bool,
+        keep_out: Sequence[tuple[np.ndarray, float]],
+        inside_cylinder: tuple[np.ndarray, float] | None,
+    ) -> tuple[SphereObstacle, ...]:
+        """The voxels inside (``in_keep_out``) or outside the keep-out and outside the
+        cylinder, as spheres ``<name>_<k>``, most recently hit first, at most max_obstacles."""
         r = self.p.sphere_radius_m
         kept: list[tuple[int, tuple[int, int, int], np.ndarray]] = []
         for key, vox in self.voxels.items():
             c = vox.center_m
-            if not any(float(np.linalg.norm(c - k)) < kr + r for k, kr in keep_out):
+            if any(float(np.linalg.norm(c - k)) < kr + r for k, kr in keep_out) != in_keep_out:
                 continue
             if inside_cylinder is not None:
                 axis, radius = inside_cylinder
@@ -231,7 +227,7 @@ class OccupancyGrid:
             kept.append((-vox.last_hit_frame, key, c))
         kept.sort(key=lambda t: (t[0], t[1]))
         return tuple(
-            SphereObstacle(name=f"near_{i}", center_world_m=vec3(c), radius_m=r)
+            SphereObstacle(name=f"{name}_{i}", center_world_m=vec3(c), radius_m=r)
             for i, (_f, _k, c) in enumerate(kept[: self.p.max_obstacles])
         )
 
