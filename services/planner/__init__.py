@@ -121,11 +121,12 @@ class Settings(ServiceSettings):
         "branch_check_depth_m into the occupied space the scene has seen (branchcheck.py).",
     )
     branch_check_depth_m: float = Field(
-        default=0.01,
+        default=0.02,
         ge=0,
         le=0.1,
         description="… how far into the occupied spheres (a voxel's branch points, inflated by "
-        "the sphere radius) the clearest solution may go, m.",
+        "the sphere radius: they put a tool 19–41 mm nearer a branch than it is) the clearest "
+        "solution may go, m.",
     )
     neighbour_clearance_m: float = Field(
         default=0.0,
