@@ -291,17 +291,17 @@ def truth_reachability(
     ik_ok: set[int] = set()
     tree_ok: set[int] = set()
     for i, shape in shapes.items():
-        poses = (harvest_pose(shape, ps), pre_pose(shape, ps))
-        if not all(core.kin.reach(p.tip_world_m, p.basket_below_m).reachable for p in poses):
+        # the IK solutions at every sampled yaw: none for a pose is the IK's "out of reach"
+        sols = [
+            core.kin.solutions(p.tip_world_m, p.basket_below_m)
+            for p in (harvest_pose(shape, ps), pre_pose(shape, ps))
+        ]
+        if not all(sols):
             why[i] = "IK"
             continue
         ik_ok.add(i)
         if touches_tree is None or all(
-            any(
-                not touches_tree(s.q_rad)
-                for s in core.kin.solutions(p.tip_world_m, p.basket_below_m)
-            )
-            for p in poses
+            any(not touches_tree(s.q_rad) for s in pose_sols) for pose_sols in sols
         ):
             tree_ok.add(i)
         else:
