@@ -205,7 +205,7 @@ class DistanceEngine:
         for kind, (g_idx, _) in candidates.items():
             uniq, slot = near[kind]  # obstacle → its slot, in obstacle order
             n_near += len(uniq)
-            key = (id(obstacles), uniq.tobytes())
+            key = (obstacles.serial, uniq.tobytes())
             if self._slots_hold.get(kind) != key:  # else the slots already hold these
                 self._fill_slots(kind, uniq.tolist(), obstacles)
                 self._slots_hold[kind] = key

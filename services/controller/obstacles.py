@@ -3,6 +3,7 @@ touch (PlanTarget.ignore_fruit_ids) left out, as numpy arrays for the broad phas
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -14,6 +15,9 @@ from schemas.scene import Obstacles
 
 class ObstacleError(ValueError):
     """An obstacle set the dampers cannot trust (degenerate or absurd shapes)."""
+
+
+_SERIALS = itertools.count()
 
 
 @dataclass(frozen=True)
@@ -28,6 +32,9 @@ class ObstacleArrays:
     cylinder_radii_m: np.ndarray  # (M,)
     sphere_centers_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (K, 3)
     sphere_radii_m: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (K,)
+    # Never reused (unlike id()): what the distance engine's slots hold is keyed by it, and a
+    # new set of arrays may be born where a freed one lived.
+    serial: int = field(default_factory=lambda: next(_SERIALS), init=False, compare=False)
 
     @property
     def count(self) -> int:

@@ -91,3 +91,24 @@ def test_an_empty_obstacle_set_computes_the_self_pairs_only(robot: ControlledRob
     rep = engine.compute(obstacle_arrays(Obstacles()), ACT)
     assert rep.pairs_checked == engine.n_self == 78
     assert rep.min_m["self"] is not None and rep.min_m["self"] > 0.05
+
+
+def test_slots_follow_new_arrays_born_where_freed_ones_lived(robot: ControlledRobot) -> None:
+    """The engine keeps what its slots hold between calls; a new set of arrays (a sphere moved)
+    must refill them even when CPython puts it at a freed set's address (an id() key did not:
+    the branch check builds a short-lived set per fruit)."""
+    from schemas.scene import SphereObstacle
+
+    engine = DistanceEngine(robot, cull_m=0.3)
+    fresh = DistanceEngine(robot, cull_m=0.3)  # its slots refilled every time (below)
+    q = home_q()
+    robot.set_q(q)
+    tip = robot.robot.get_T_world_frame("cutter_tip")[:3, 3]
+    for k in range(12):
+        gap = 0.01 + 0.01 * (k % 4)  # the sphere's surface this far from the tip's point
+        centre = tip + np.array([0.0, 0.0, -(0.03 + gap)])
+        sphere = SphereObstacle(name="s", center_world_m=tuple(map(float, centre)), radius_m=0.03)
+        got = engine.compute(obstacle_arrays(Obstacles(spheres=(sphere,))), {"branch": 1.0})
+        fresh._slots_hold = {}
+        want = fresh.compute(obstacle_arrays(Obstacles(spheres=(sphere,))), {"branch": 1.0})
+        assert got.min_m["branch"] == pytest.approx(want.min_m["branch"], abs=1e-9), k
