@@ -104,6 +104,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     h.add_argument("--mode", choices=["inproc", "stack"], default="inproc", help="how to run")
     h.add_argument("--max-s", type=float, default=240.0, help="sim seconds per run at most")
     h.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        metavar="N",
+        help="inproc runs at once, each in its own process (default 1; the rows are the same "
+        "for any N: each run is deterministic on its own). Wall times and the real-time factor "
+        "are then per run under that load",
+    )
+    h.add_argument(
         "--set",
         action="append",
         default=[],
@@ -184,7 +193,10 @@ def cmd_bench_harvest(args: argparse.Namespace) -> int:
             args.mode,
             args.max_s,
             settings=parse_sets(args.set),
+            jobs=args.jobs,
         )
+        if cfg.jobs < 1:
+            raise BenchError(f"--jobs must be at least 1, got {cfg.jobs}")
         bad = [o for o in cfg.orders if o not in ("nearest", "planned")]
         if bad:
             raise BenchError(f"unknown order policies {bad} (nearest, planned)")

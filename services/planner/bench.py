@@ -542,50 +542,77 @@ class BenchConfig:
     fruit_count: int | None = None
     mode: str = "inproc"
     max_s: float = 240.0
-    perception: NodeFactory | None = None  # tests: a stand-in chain
+    perception: NodeFactory | None = None  # tests: a stand-in chain (module-level with jobs)
     settings: dict[str, dict[str, Any]] = field(default_factory=dict)  # --set, by service
+    jobs: int = 1  # inproc runs at once (processes)
 
 
 def run_harvest_bench(
     cfg: BenchConfig, progress: Callable[[str], None] | None = None
 ) -> dict[str, Any]:
-    runs: list[dict[str, Any]] = []
-    sets = cfg.settings
-    perception = cfg.perception or (lambda: perception_chain(sets))
+    """Every (order, seed) run, ``cfg.jobs`` at a time (inproc runs in spawned processes: each
+    run is deterministic on its own, so the rows do not depend on how many run at once)."""
     workdir = Path(tempfile.mkdtemp(prefix="bench-harvest-"))
-    for order in cfg.orders:
-        for seed in cfg.seeds:
-            sim_s: dict[str, Any] = {"scenario": cfg.scenario, "seed": seed}
-            if cfg.fruit_count is not None:
-                sim_s["fruit_count"] = cfg.fruit_count
-            sim_s.update(sets.get("sim", {}))
-            plan_s = {"order": order, "scenario": cfg.scenario, "seed": seed}
-            plan_s.update(sets.get("planner", {}))
-            if cfg.mode == "stack":
-                got, sim_t, wall = run_stack(sim_s, plan_s, workdir, f"{order}-{seed}", sets)
-            else:
-                got, sim_t, wall = run_inproc(
-                    sim_s, plan_s, cfg.max_s, perception, sets.get("controller")
-                )
-            row = {"order": order, "seed": seed, "sim_s": round(sim_t, 3), "wall_s": round(wall, 2)}
-            row["rtf"] = round(sim_t / wall, 3) if wall > 0 else None
-            row.update(evaluate(got, *first_frame(sim_s, plan_s)))
-            runs.append(row)
-            if progress is not None:
-                progress(
-                    f"{order} seed {seed}: {row['harvested']}/{row['reachable']} harvested, "
-                    f"{row['collisions']} collisions (+{row['target_contacts']} with the target), "
-                    f"{sim_t:.1f} s sim in {wall:.0f} s"
-                )
+    todo = [(order, seed) for order in cfg.orders for seed in cfg.seeds]
+    rows: dict[tuple[str, int], dict[str, Any]] = {}
+
+    def done(row: dict[str, Any]) -> None:
+        rows[(row["order"], row["seed"])] = row
+        if progress is not None:
+            progress(
+                f"{row['order']} seed {row['seed']}: {row['harvested']}/{row['reachable']} "
+                f"harvested, {row['collisions']} collisions (+{row['target_contacts']} with the "
+                f"target), {row['sim_s']:.1f} s sim in {row['wall_s']:.0f} s"
+            )
+
+    parallel = cfg.jobs > 1 and cfg.mode == "inproc" and len(todo) > 1
+    if parallel:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        ctx = multiprocessing.get_context("spawn")  # no forked torch or pybullet state
+        with ProcessPoolExecutor(min(cfg.jobs, len(todo)), mp_context=ctx) as pool:
+            futures = [pool.submit(run_one, cfg, order, seed, workdir) for order, seed in todo]
+            for fut in as_completed(futures):
+                done(fut.result())
+    else:
+        for order, seed in todo:
+            done(run_one(cfg, order, seed, workdir))
+    runs = [rows[k] for k in todo]
     return {
         "scenario": cfg.scenario,
         "seeds": cfg.seeds,
         "mode": cfg.mode,
         "fruit_count": cfg.fruit_count,
-        "settings": sets,
+        "settings": cfg.settings,
         "policies": {o: aggregate([r for r in runs if r["order"] == o]) for o in cfg.orders},
         "runs": runs,
     }
+
+
+def run_one(cfg: BenchConfig, order: str, seed: int, workdir: Path) -> dict[str, Any]:
+    """One seed with one order policy: run, then judged on the truth (the row of the table)."""
+    sets = cfg.settings
+    sim_s: dict[str, Any] = {"scenario": cfg.scenario, "seed": seed}
+    if cfg.fruit_count is not None:
+        sim_s["fruit_count"] = cfg.fruit_count
+    sim_s.update(sets.get("sim", {}))
+    plan_s = {"order": order, "scenario": cfg.scenario, "seed": seed}
+    plan_s.update(sets.get("planner", {}))
+    if cfg.mode == "stack":
+        got, sim_t, wall = run_stack(sim_s, plan_s, workdir, f"{order}-{seed}", sets)
+    else:
+        perception = cfg.perception or (lambda: perception_chain(sets))
+        got, sim_t, wall = run_inproc(sim_s, plan_s, cfg.max_s, perception, sets.get("controller"))
+    row: dict[str, Any] = {
+        "order": order,
+        "seed": seed,
+        "sim_s": round(sim_t, 3),
+        "wall_s": round(wall, 2),
+    }
+    row["rtf"] = round(sim_t / wall, 3) if wall > 0 else None
+    row.update(evaluate(got, *first_frame(sim_s, plan_s)))
+    return row
 
 
 def first_frame(sim_s: dict[str, Any], plan_s: dict[str, Any]) -> tuple[GroundTruth, Truth]:
