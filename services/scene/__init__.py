@@ -249,6 +249,17 @@ class Settings(ServiceSettings):
         description="A voxel born where one of this many recent frames saw depth behind it is a "
         "newcomer: something moved into free space (a hand). 0: none is.",
     )
+    occupancy_history_every_frames: int = Field(
+        default=15,
+        ge=1,
+        description="… or where one of the frames kept one in this many (15 Hz: one a second) saw "
+        "depth behind it (the recent frames may not: the arms, or the hand itself, in front).",
+    )
+    occupancy_history_long_frames: int = Field(
+        default=60,
+        ge=0,
+        description="… of which the last this many are kept (a minute). 0: only the recent ones.",
+    )
     occupancy_transient_forget_frames: int = Field(
         default=5,
         ge=1,

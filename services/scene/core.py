@@ -114,6 +114,8 @@ class SceneCore:
                     forget_after_frames=s.occupancy_forget_after_frames,
                     max_obstacles=s.occupancy_max_obstacles,
                     history_frames=s.occupancy_history_frames,
+                    history_every_frames=s.occupancy_history_every_frames,
+                    history_long_frames=s.occupancy_history_long_frames,
                     transient_forget_frames=s.occupancy_transient_forget_frames,
                     settle_hits=s.occupancy_settle_hits,
                 )

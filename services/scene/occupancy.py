@@ -15,8 +15,12 @@ is the point of persistence. A pixel with no valid depth (0, NaN, inf) is no evi
 way, so a broken frame neither creates nor wipes obstacles.
 
 Persistence is for what was there all along. A voxel born where one of the last
-``history_frames`` frames saw valid depth behind it is a *newcomer*: something moved into free
-space (a hand: skin falls in the paper's bark HSV box). It is an obstacle while it is hit and
+``history_frames`` frames, or one of the frames kept every ``history_every_frames`` for the
+last ``history_long_frames`` of those, saw valid depth behind it is a *newcomer*: something
+moved into free space (a hand: skin falls in the paper's bark HSV box). The sparse long memory
+is for a hand that came where the recent frames could not see behind (the arms, or the hand
+itself, in front: paper-exp1 seed 0, a hand's voxel 0.43 m ahead of the camera stayed for the
+rest of the run, 235 mm from any branch, and read as a branch in the dish's way). It is an obstacle while it is hit and
 is forgotten ``transient_forget_frames`` frames after its last hit, hidden or not, unless it was
 hit in ``settle_hits`` frames (it stayed: a branch pushed into a new place). A branch is never
 seen through before it is seen, only hidden (by a leaf, a fruit, an arm), so it keeps
@@ -52,6 +56,8 @@ class OccupancyParams:
     forget_after_frames: int = 900
     max_obstacles: int = 200
     history_frames: int = 15
+    history_every_frames: int = 15
+    history_long_frames: int = 60
     transient_forget_frames: int = 5
     settle_hits: int = 45
 
@@ -79,8 +85,12 @@ class OccupancyGrid:
     p: OccupancyParams
     voxels: dict[tuple[int, int, int], Voxel] = field(default_factory=dict)
     frame: int = 0
-    # the last history_frames frames' depth (every stride_px-th pixel) with their camera
+    # the last history_frames frames' depth (every stride_px-th pixel) with their camera, and
+    # one frame in every history_every_frames of the last history_long_frames such
     history: deque[tuple[np.ndarray, Pinhole, RigidTransform]] = field(default_factory=deque)
+    long_history: deque[tuple[np.ndarray, Pinhole, RigidTransform]] = field(
+        default_factory=deque
+    )
 
     def step(
         self,
@@ -106,10 +116,22 @@ class OccupancyGrid:
         old = [k for k, v in self.voxels.items() if self._expired(v)]
         for k in old:
             del self.voxels[k]
+        self._remember(depth_m, measured, K, T)
+
+    def _remember(
+        self, depth_m: np.ndarray, measured: np.ndarray, K: Pinhole, T: RigidTransform
+    ) -> None:
+        """Keep this frame's depth for the newcomer test (recent, and sparse over long)."""
         s = self.p.stride_px
-        self.history.append((np.where(measured[::s, ::s], depth_m[::s, ::s], 0.0), K, T))
-        while len(self.history) > self.p.history_frames:
-            self.history.popleft()
+        seen = (np.where(measured[::s, ::s], depth_m[::s, ::s], 0.0).astype(np.float32), K, T)
+        for memory, every, size in (
+            (self.history, 1, self.p.history_frames),
+            (self.long_history, self.p.history_every_frames, self.p.history_long_frames),
+        ):
+            if size and (self.frame - 1) % every == 0:  # the first frame is kept
+                memory.append(seen)
+            while len(memory) > size:
+                memory.popleft()
 
     def _expired(self, v: Voxel) -> bool:
         unseen = self.frame - v.last_hit_frame
@@ -118,10 +140,10 @@ class OccupancyGrid:
         return unseen > self.p.forget_after_frames
 
     def _seen_through(self, c_world: np.ndarray) -> bool:
-        """Did a recent frame see valid depth ``clear_margin_m`` behind this point? Then what
-        is there now moved in (a hand; a branch is never seen through, only hidden)."""
+        """Did a remembered frame see valid depth ``clear_margin_m`` behind this point? Then
+        what is there now moved in (a hand; a branch is never seen through, only hidden)."""
         s = self.p.stride_px
-        for depth, K, T in self.history:
+        for depth, K, T in (*self.history, *self.long_history):
             c = T.to_camera(c_world)
             if c[2] <= 1e-3:
                 continue

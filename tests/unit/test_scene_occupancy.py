@@ -178,6 +178,25 @@ def test_a_hand_that_swept_past_is_forgotten_though_an_arm_hides_where_it_was() 
     assert grid.obstacles() == ()
 
 
+def test_a_hand_that_came_where_only_older_frames_saw_through_is_a_newcomer() -> None:
+    """The arm hid the spot for longer than the recent frames remember; the hand then came in
+    front of it. The first frame, kept in the sparse long memory, saw the wall behind: the hand
+    is forgotten once gone (paper-exp1 seed 0: without it, a hand's voxel stayed in the dish's
+    way for the rest of the run)."""
+    hand = scene_of(WALL, ARM, (0.25, BRANCH, BARK))
+    hidden = scene_of(WALL, ARM)
+    for long_frames, kept in ((P.history_long_frames, False), (0, True)):
+        grid = OccupancyGrid(
+            OccupancyParams(**{**P.__dict__, "history_long_frames": long_frames})
+        )
+        for sc in [scene_of(WALL)] + [hidden] * (P.history_frames + 5) + [hand] * 3:
+            grid.step(bark_mask(sc), sc.depth, K, T, ())
+        assert len(grid.obstacles()) > 0  # an obstacle while it is there
+        for _ in range(P.transient_forget_frames + 1):
+            grid.step(bark_mask(hidden), hidden.depth, K, T, ())
+        assert (len(grid.obstacles()) > 0) is kept
+
+
 def test_a_branch_seen_from_the_start_or_uncovered_stays_where_an_arm_hides_it() -> None:
     """A branch is never seen through before it is seen: there from the first frame, or
     uncovered by a leaf that swung away, it is remembered behind the arm."""
