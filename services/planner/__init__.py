@@ -116,9 +116,10 @@ class Settings(ServiceSettings):
     )
     branch_check: bool = Field(
         default=False,
-        description="Before committing to a fruit, refuse it as unreachable when every IK "
-        "solution of its harvest pose, or of its pre-pose, puts the robot more than "
-        "branch_check_depth_m into the occupied space the scene has seen (branchcheck.py).",
+        description="Before committing to a fruit, refuse it when every IK solution of its "
+        "harvest pose, or of its pre-pose, puts a tool (the bodies on each arm's last joint) "
+        "more than branch_check_depth_m into the occupied space the scene has seen, its own "
+        "twig left out (branchcheck.py): deferred the first time, unreachable the second.",
     )
     branch_check_depth_m: float = Field(
         default=0.02,
@@ -126,7 +127,14 @@ class Settings(ServiceSettings):
         le=0.1,
         description="… how far into the occupied spheres (a voxel's branch points, inflated by "
         "the sphere radius: they put a tool 19–41 mm nearer a branch than it is) the clearest "
-        "solution may go, m.",
+        "solution's tools may go, m.",
+    )
+    branch_check_own_branch_m: float = Field(
+        default=0.1,
+        ge=0,
+        le=0.3,
+        description="… spheres above the fruit's top and within this of it are its own twig "
+        "(the cutter closes on the peduncle next to it): not in the way, m.",
     )
     neighbour_clearance_m: float = Field(
         default=0.0,

@@ -545,11 +545,9 @@ class Machine:
         A fruit blocked by one that is still to do but not a candidate now (waiting after a
         stuck attempt) waits too; one that no order can clear (blocked by a fruit that stays,
         or in a cycle of blockers) is given up."""
-        for r in cands:
-            self._check_reach(r, now)
-        ok = [r for r in cands if not r.finished]
-        if len(ok) != len(cands):
-            return None
+        if not all([self._check_reach(r, now) for r in cands]):  # each checked: a list
+            return None  # skipped or deferred: the candidates changed
+        ok = cands
         index = {r.key: i for i, r in enumerate(ok)}
         blocking = [self._blockers(r) for r in ok]
         for r, bl in zip(ok, blocking, strict=True):
@@ -625,7 +623,8 @@ class Machine:
 
     def _check_reach(self, rec: FruitRecord, now: int) -> bool:
         """IK of the harvest pose and the pre-pose (cached), then (``branch_check``) their IK
-        solutions against the branches seen now; unreachable: skipped now."""
+        solutions against the branches seen now. Out of reach: skipped now, final; a branch in
+        the way: deferred the first time (retried after the others), final the second."""
         h = harvest_pose(rec.planned, self.pose_settings)
         p = pre_pose(rec.planned, self.pose_settings)
         if rec.reach is None:
@@ -637,9 +636,18 @@ class Machine:
         if hv.reachable and pv.reachable:
             if self.branches is None:
                 return True
-            verdict = self.branches.check(self.kin, [("harvest pose", h), ("pre-pose", p)])
+            verdict = self.branches.check(
+                self.kin, rec.planned, [("harvest pose", h), ("pre-pose", p)]
+            )
             if verdict.clear:
                 return True
+            if not rec.deferred:
+                # What reads as a branch may be passing (a hand seen in front is occupied space
+                # while it is hit): look again when nothing else is left.
+                rec.deferred = True
+                why = f"blocked: {verdict.why()}; retried after the others"
+                self.events.append(Event("fruit_skipped", rec.fruit_id, reason=why))
+                return False
             why = f"unreachable: {verdict.why()}"
         else:
             which = "harvest pose" if not hv.reachable else "pre-pose"
