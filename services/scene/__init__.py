@@ -271,6 +271,13 @@ class Settings(ServiceSettings):
         description="… unless it was hit in this many frames (it stayed): then it is kept like "
         "a branch seen from the start.",
     )
+    occupancy_blank_frames: int = Field(
+        default=15,
+        ge=0,
+        description="A voxel whose pixel shows no depth return and no bark for this many frames "
+        "since its last hit, the robot not in its line of sight, is forgotten: nothing stands "
+        "there and nothing behind it is in range (a hand swept in front of the sky). 0: never.",
+    )
     occupancy_max_obstacles: int = Field(
         default=200,
         ge=0,

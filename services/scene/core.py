@@ -118,6 +118,7 @@ class SceneCore:
                     history_long_frames=s.occupancy_history_long_frames,
                     transient_forget_frames=s.occupancy_transient_forget_frames,
                     settle_hits=s.occupancy_settle_hits,
+                    blank_frames=s.occupancy_blank_frames,
                 )
             )
             if s.occupancy

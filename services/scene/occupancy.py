@@ -41,6 +41,10 @@ from services.robot.clearance import Capsule
 from services.scene.geometry import Pinhole, RigidTransform, vec3
 
 
+BLANK_WINDOW_PX = 3  # bark this near a voxel's pixel: the branch may still stand there
+SIGHT_SAMPLES = 150  # points along a line of sight (1.5 m at most: one a centimetre)
+
+
 @dataclass(frozen=True)
 class OccupancyParams:
     """Voxel grid settings (m, px, frames); see the scene Settings for their meaning."""
@@ -60,6 +64,7 @@ class OccupancyParams:
     history_long_frames: int = 60
     transient_forget_frames: int = 5
     settle_hits: int = 45
+    blank_frames: int = 15
 
 
 @dataclass
@@ -70,6 +75,7 @@ class Voxel:
     points: int
     last_hit_frame: int
     free_frames: int = 0
+    blank_frames: int = 0  # frames since its last hit with no depth and no bark at its pixel
     newcomer: bool = False  # born where recent frames saw through: something moved in
     hits: int = 1
 
@@ -109,6 +115,7 @@ class OccupancyGrid:
         # background behind a hand that swept past is often that far (paper-exp1: the hand's
         # voxels stayed in front of the arms for the rest of the run).
         self._clear(depth_m, measured, K, T)
+        self._blank(mask, measured, K, T, robot)
         pts = _points_world(mask & valid, depth_m, K, T, self.p.stride_px)
         if robot and len(pts):
             pts = pts[~_near_robot(pts, robot, self.p.robot_margin_m)]
@@ -178,7 +185,47 @@ class OccupancyGrid:
                 v.sum_m += s
                 v.points += n
                 v.hits += 1
-                v.last_hit_frame, v.free_frames = self.frame, 0
+                v.last_hit_frame, v.free_frames, v.blank_frames = self.frame, 0, 0
+
+    def _blank(
+        self,
+        mask: np.ndarray,
+        measured: np.ndarray,
+        K: Pinhole,
+        T: RigidTransform,
+        robot: Sequence[Capsule],
+    ) -> None:
+        """Forget voxels whose pixel has shown no depth return and no bark for ``blank_frames``
+        frames since their last hit, the robot not in the line of sight: what was there is gone
+        and nothing stands behind it within the camera's range (a hand swept in front of the
+        sky or a far wall; paper-exp1 seed 0, a hand's voxel stayed for the rest of the run,
+        because nothing behind it ever gave depth). A branch in the stereo shadow of a nearer
+        object still shows bark; one behind an arm has the arm in its line of sight."""
+        if not self.voxels or self.p.blank_frames == 0:
+            return
+        keys = list(self.voxels)
+        uv = _pixels(np.array([self.voxels[k].center_m for k in keys]), K, T)
+        w = BLANK_WINDOW_PX
+        blank = []
+        for i, (u, v) in enumerate(uv):
+            if u < 0 or measured[v, u]:
+                continue  # out of view, or depth there (the clearing rule's evidence)
+            if mask[max(v - w, 0) : v + w + 1, max(u - w, 0) : u + w + 1].any():
+                self.voxels[keys[i]].blank_frames = 0  # bark seen there: it may stand there
+                continue
+            blank.append(i)
+        if not blank:
+            return
+        behind_robot = _sight_blocked(
+            T.t_m, np.array([self.voxels[keys[i]].center_m for i in blank]), robot
+        )
+        for i, hidden in zip(blank, behind_robot.tolist(), strict=True):
+            if hidden:
+                continue
+            vox = self.voxels[keys[i]]
+            vox.blank_frames += 1
+            if vox.blank_frames >= self.p.blank_frames:
+                del self.voxels[keys[i]]
 
     def _clear(self, depth_m: np.ndarray, valid: np.ndarray, K: Pinhole, T: RigidTransform) -> None:
         """Count a frame as free for each voxel whose centre's pixel sees valid depth clearly
@@ -264,6 +311,30 @@ def _points_world(
     z = depth_m[vs, us]
     cam = np.stack([(us - K.cx) / K.fx * z, (vs - K.cy) / K.fy * z, z], axis=1)
     return T.to_world(cam)
+
+
+def _pixels(c_world: np.ndarray, K: Pinhole, T: RigidTransform) -> np.ndarray:
+    """(N, 2) integer pixels (u, v) of world points; (-1, -1) behind the camera or outside."""
+    c = T.to_camera(c_world)
+    out = np.full((len(c), 2), -1, dtype=int)
+    front = c[:, 2] > 1e-3
+    u = np.round(K.fx * c[front, 0] / c[front, 2] + K.cx).astype(int)
+    v = np.round(K.fy * c[front, 1] / c[front, 2] + K.cy).astype(int)
+    ok = (u >= 0) & (u < K.width) & (v >= 0) & (v < K.height)
+    idx = np.flatnonzero(front)[ok]
+    out[idx, 0], out[idx, 1] = u[ok], v[ok]
+    return out
+
+
+def _sight_blocked(cam: np.ndarray, targets: np.ndarray, robot: Sequence[Capsule]) -> np.ndarray:
+    """(N,) whether the line of sight from ``cam`` to each target passes through a robot
+    capsule (sampled every ~1 cm; the capsules are already generous)."""
+    if not robot:
+        return np.zeros(len(targets), dtype=bool)
+    t = np.linspace(0.0, 1.0, SIGHT_SAMPLES)
+    pts = cam + (targets[:, None, :] - cam) * t[None, :, None]  # (N, S, 3)
+    near = _near_robot(pts.reshape(-1, 3), robot, 0.0).reshape(len(targets), -1)
+    return near.any(axis=1)
 
 
 def _near_robot(pts: np.ndarray, robot: Sequence[Capsule], margin_m: float) -> np.ndarray:

@@ -197,6 +197,33 @@ def test_a_hand_that_came_where_only_older_frames_saw_through_is_a_newcomer() ->
         assert (len(grid.obstacles()) > 0) is kept
 
 
+def test_a_hand_in_front_of_nothing_in_range_is_forgotten_once_gone() -> None:
+    """Nothing behind the hand gives depth (the sky, a far wall): it is never seen through.
+    Once its pixels show no depth and no bark for blank_frames it is forgotten; a branch whose
+    pixels lose their depth but still show bark (a stereo shadow) is kept, and so is one with
+    the robot in its line of sight."""
+    hand, empty = scene_of((0.3, BRANCH, BARK)), Scene()  # Scene(): no depth anywhere
+    shadow = scene_of((0.3, BRANCH, BARK))
+    shadow.depth[:] = 0.0  # bark in the image, no depth at all
+    centre_cam = K.deproject((BRANCH[0] + BRANCH[1]) / 2, (BRANCH[2] + BRANCH[3]) / 2, 0.15)
+    arm = (T.to_world(centre_cam) - [0, 0.05, 0], T.to_world(centre_cam) + [0, 0.05, 0], 0.04)
+    for blank, after, robot, kept in (
+        (P.blank_frames, empty, (), False),
+        (0, empty, (), True),
+        (P.blank_frames, shadow, (), True),
+        (P.blank_frames, empty, (arm,), True),
+    ):
+        grid = OccupancyGrid(OccupancyParams(**{**P.__dict__, "blank_frames": blank}))
+        for _ in range(3):
+            grid.step(bark_mask(hand), hand.depth, K, T, ())
+        assert len(grid.obstacles()) > 0
+        for _ in range(P.blank_frames - 1):
+            grid.step(bark_mask(after), after.depth, K, T, robot)
+        assert len(grid.obstacles()) > 0  # not yet
+        grid.step(bark_mask(after), after.depth, K, T, robot)
+        assert (len(grid.obstacles()) > 0) is kept, (blank, robot)
+
+
 def test_a_branch_seen_from_the_start_or_uncovered_stays_where_an_arm_hides_it() -> None:
     """A branch is never seen through before it is seen: there from the first frame, or
     uncovered by a leaf that swung away, it is remembered behind the arm."""
