@@ -136,6 +136,13 @@ class Settings(ServiceSettings):
         description="… spheres above the fruit's top and within this of it are its own twig "
         "(the cutter closes on the peduncle next to it): not in the way, m.",
     )
+    branch_check_min_age_s: float = Field(
+        default=2.0,
+        ge=0,
+        le=60,
+        description="… a sphere counts once the scene has listed it this long, or since its "
+        "first states (a hand passing in front is occupied space while it is seen), s.",
+    )
     neighbour_clearance_m: float = Field(
         default=0.0,
         ge=0,

@@ -56,7 +56,9 @@ class PlannerCore:
         if s.branch_check:
             from services.planner.branchcheck import BranchCheck
 
-            self.machine.branches = BranchCheck(s.branch_check_depth_m, s.branch_check_own_branch_m)
+            self.machine.branches = BranchCheck(
+                s.branch_check_depth_m, s.branch_check_own_branch_m, s.branch_check_min_age_s
+            )
         if s.plan_approach != "off":
             from services.planner.motion import ApproachPlanner
 

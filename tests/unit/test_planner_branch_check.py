@@ -28,9 +28,11 @@ def branch(through: np.ndarray, name: str = "b") -> tuple[SphereObstacle, ...]:
     )
 
 
-def scene(spheres: tuple[SphereObstacle, ...], near: tuple[SphereObstacle, ...] = ()) -> SceneState:
+def scene(
+    spheres: tuple[SphereObstacle, ...], near: tuple[SphereObstacle, ...] = (), at_s: float = 0.0
+) -> SceneState:
     return SceneState(
-        header=Header(stamp_ns=0, seq=99, source="scene"),
+        header=Header(stamp_ns=round(at_s * 1e9), seq=99, source="scene"),
         trunk=Trunk(found=False),
         obstacles=Obstacles(spheres=spheres),
         spheres_near_selected=near,
@@ -137,3 +139,21 @@ def test_the_core_builds_the_check_and_gives_it_every_scene_state() -> None:
     core.handle("scene/state", scene(spheres[:3], spheres[3:]))
     core.handle("control/status", status(0, 0.0, TICK_NS))
     assert len(core.machine.branches.spheres) == len(spheres)  # the keep-out's included
+
+
+def test_what_came_after_the_start_counts_once_it_stayed() -> None:
+    """A hand passing under the fruit from 4 s on is occupied space while it is seen: the check
+    does not refuse the fruit for it; what is still listed 2 s later does count, and a sphere
+    that left the list starts its age again."""
+    core = checking()
+    check = core.machine.branches
+    assert check is not None
+    hand = branch(dish_level(core))
+    check.set_scene(scene((), at_s=0.0))
+    check.set_scene(scene(hand, at_s=4.0))
+    assert check.young == len(hand) and select(core) == 1  # not refused
+    check.set_scene(scene(hand, at_s=6.1))
+    assert check.young == 0 and select(core) == 3  # it stayed: fruit 1 waits
+    check.set_scene(scene((), at_s=6.2))
+    check.set_scene(scene(hand, at_s=6.3))
+    assert check.young == len(hand)
