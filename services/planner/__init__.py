@@ -115,7 +115,7 @@ class Settings(ServiceSettings):
         default=0.3, gt=0, description="No progress this long: the tools have settled, s."
     )
     branch_check: bool = Field(
-        default=False,
+        default=True,
         description="Before committing to a fruit, refuse it when every IK solution of its "
         "harvest pose, or of its pre-pose, puts a tool (the bodies on each arm's last joint) "
         "more than branch_check_depth_m into the occupied space the scene has seen, its own "

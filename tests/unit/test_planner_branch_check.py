@@ -96,7 +96,7 @@ def test_branches_elsewhere_or_no_check_leave_the_fruit_alone() -> None:
     far = branch(dish_level(core) + np.array([0, 0, -0.5]))  # half a metre under the dish
     core.machine.branches.set_scene(scene(far))
     assert select(core) == 1 and not core.book.records[1].finished
-    off = checking(on=False)  # the default: the scene's branches are the dampers' business
+    off = checking(on=False)  # branch_check=false: the branches are the dampers' business
     assert off.machine.branches is None and select(off) == 1
 
 
