@@ -20,12 +20,13 @@ last ``history_long_frames`` of those, saw valid depth behind it is a *newcomer*
 moved into free space (a hand: skin falls in the paper's bark HSV box). The sparse long memory
 is for a hand that came where the recent frames could not see behind (the arms, or the hand
 itself, in front: paper-exp1 seed 0, a hand's voxel 0.43 m ahead of the camera stayed for the
-rest of the run, 235 mm from any branch, and read as a branch in the dish's way). It is an obstacle while it is hit and
-is forgotten ``transient_forget_frames`` frames after its last hit, hidden or not, unless it was
-hit in ``settle_hits`` frames (it stayed: a branch pushed into a new place). A branch is never
-seen through before it is seen, only hidden (by a leaf, a fruit, an arm), so it keeps
-persistence. Paper-exp1: the hand that swept 0.3 m ahead of the camera left voxels the arms then
-hid; they held a cutter elbow at its damper distance, 25 cm from any branch.
+rest of the run, 235 mm from any branch, and read as a branch in the dish's way). It is an
+obstacle while it is hit and is forgotten ``transient_forget_frames`` frames after its last
+hit, hidden or not, unless it was hit in ``settle_hits`` frames (it stayed: a branch pushed
+into a new place). A branch is never seen through before it is seen, only hidden (by a leaf, a
+fruit, an arm), so it keeps persistence. Paper-exp1: the hand that swept 0.3 m ahead of the
+camera left voxels the arms then hid; they held a cutter elbow at its damper distance, 25 cm
+from any branch.
 """
 
 from __future__ import annotations
@@ -39,7 +40,6 @@ import numpy as np
 from schemas.scene import SphereObstacle
 from services.robot.clearance import Capsule
 from services.scene.geometry import Pinhole, RigidTransform, vec3
-
 
 BLANK_WINDOW_PX = 3  # bark this near a voxel's pixel: the branch may still stand there
 SIGHT_SAMPLES = 150  # points along a line of sight (1.5 m at most: one a centimetre)
@@ -94,9 +94,7 @@ class OccupancyGrid:
     # the last history_frames frames' depth (every stride_px-th pixel) with their camera, and
     # one frame in every history_every_frames of the last history_long_frames such
     history: deque[tuple[np.ndarray, Pinhole, RigidTransform]] = field(default_factory=deque)
-    long_history: deque[tuple[np.ndarray, Pinhole, RigidTransform]] = field(
-        default_factory=deque
-    )
+    long_history: deque[tuple[np.ndarray, Pinhole, RigidTransform]] = field(default_factory=deque)
 
     def step(
         self,
@@ -334,7 +332,7 @@ def _sight_blocked(cam: np.ndarray, targets: np.ndarray, robot: Sequence[Capsule
     t = np.linspace(0.0, 1.0, SIGHT_SAMPLES)
     pts = cam + (targets[:, None, :] - cam) * t[None, :, None]  # (N, S, 3)
     near = _near_robot(pts.reshape(-1, 3), robot, 0.0).reshape(len(targets), -1)
-    return near.any(axis=1)
+    return np.asarray(near.any(axis=1), dtype=bool)
 
 
 def _near_robot(pts: np.ndarray, robot: Sequence[Capsule], margin_m: float) -> np.ndarray:

@@ -186,9 +186,7 @@ def test_a_hand_that_came_where_only_older_frames_saw_through_is_a_newcomer() ->
     hand = scene_of(WALL, ARM, (0.25, BRANCH, BARK))
     hidden = scene_of(WALL, ARM)
     for long_frames, kept in ((P.history_long_frames, False), (0, True)):
-        grid = OccupancyGrid(
-            OccupancyParams(**{**P.__dict__, "history_long_frames": long_frames})
-        )
+        grid = OccupancyGrid(OccupancyParams(**{**P.__dict__, "history_long_frames": long_frames}))
         for sc in [scene_of(WALL)] + [hidden] * (P.history_frames + 5) + [hand] * 3:
             grid.step(bark_mask(sc), sc.depth, K, T, ())
         assert len(grid.obstacles()) > 0  # an obstacle while it is there
@@ -206,7 +204,8 @@ def test_a_hand_in_front_of_nothing_in_range_is_forgotten_once_gone() -> None:
     shadow = scene_of((0.3, BRANCH, BARK))
     shadow.depth[:] = 0.0  # bark in the image, no depth at all
     centre_cam = K.deproject((BRANCH[0] + BRANCH[1]) / 2, (BRANCH[2] + BRANCH[3]) / 2, 0.15)
-    arm = (T.to_world(centre_cam) - [0, 0.05, 0], T.to_world(centre_cam) + [0, 0.05, 0], 0.04)
+    along_y = np.array([0.0, 0.05, 0.0])
+    arm = (T.to_world(centre_cam) - along_y, T.to_world(centre_cam) + along_y, 0.04)
     for blank, after, robot, kept in (
         (P.blank_frames, empty, (), False),
         (0, empty, (), True),
