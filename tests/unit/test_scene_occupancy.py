@@ -204,8 +204,8 @@ def test_a_hand_in_front_of_nothing_in_range_is_forgotten_once_gone() -> None:
     shadow = scene_of((0.3, BRANCH, BARK))
     shadow.depth[:] = 0.0  # bark in the image, no depth at all
     centre_cam = K.deproject((BRANCH[0] + BRANCH[1]) / 2, (BRANCH[2] + BRANCH[3]) / 2, 0.15)
-    along_y = np.array([0.0, 0.05, 0.0])
-    arm = (T.to_world(centre_cam) - along_y, T.to_world(centre_cam) + along_y, 0.04)
+    centre, along_y = T.to_world(centre_cam), np.array([0.0, 0.05, 0.0])
+    arm = (centre - along_y, centre + along_y, 0.04)  # an arm capsule across the line of sight
     for blank, after, robot, kept in (
         (P.blank_frames, empty, (), False),
         (0, empty, (), True),
