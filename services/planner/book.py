@@ -261,6 +261,22 @@ class FruitBook:
             if d > self.replan_m:
                 self.moved.append((rec.key, d))
 
+    def replan_from_view(self, rec: FruitRecord) -> float | None:
+        """Re-plan ``rec`` from its latest view, however near, when the scene computed it from
+        this frame (a cut view only for a target not planned from a whole one): the view from
+        the ready pose after a failed cut. Returns how far the target moved, m (None: no such
+        view, the target stays)."""
+        f = rec.seen
+        planned_m = (rec.planned.d_h_m, rec.planned.d_v_m)
+        whole = _whole(f) and not _smaller_than_shown(f, rec.sizes_m)
+        whole = whole and not (rec.planned_whole and _shrunk(f, planned_m, SHRUNK_VIEW))
+        if not _this_frames(f) or (rec.planned_whole and not whole):
+            return None
+        shape = shape_of(f)
+        d = float(np.linalg.norm(shape.centre_world_m - rec.planned.centre_world_m))
+        rec.planned, rec.planned_whole, rec.pushed, rec.reach = shape, whole, False, None
+        return d
+
     def candidates(self, max_unseen: int) -> list[FruitRecord]:
         """Records still to do, in the scene, seen recently, not in the basket, by key; fruit
         deferred as blocked only when no other is left."""

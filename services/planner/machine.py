@@ -14,8 +14,11 @@
 * **harvest**: the cutter tip to the peduncle, the dish under the fruit; the fruit may be
   touched (``ignore_fruit_ids``). Stuck or timed out → unreachable, leave.
 * **cut**: one tool command, then wait for the basket's fruit count to go up (collected).
-  After ``collect_timeout_s``: the fruit still seen on its branch → the cut failed: retry
-  (harvest again) up to ``max_cut_attempts``, then give up (cut_failed); gone → dropped.
+  After ``collect_timeout_s``: the fruit still seen on its branch → the cut failed: retry up
+  to ``max_cut_attempts``, then give up (cut_failed); gone → dropped. With
+  ``relook_before_retry`` a retry first looks from the ready pose and re-plans from that view
+  (the tools hid the fruit at the cut), then approaches again; without it (the default), it
+  harvests again from where it is.
 * **leave**: back to the pre-pose of that fruit, then select. After a stall, with
   ``retrace_after_stall``: back along the attempt's joint path instead (retrace.py).
 * **home**: nothing to do: the ready pose; the run ends after ``finish_after_s`` there with no
@@ -117,6 +120,7 @@ class Machine:
     verify: CutState | None = None  # an unconfirmed cut being checked from the ready pose
     arrived_ns: int | None = None  # when the ready pose was reached while verifying
     looking: bool = False  # verifying: backed out to the pre-pose, now going to look
+    relook: bool = False  # verifying a failed cut's fruit seen on its branch: re-plan, retry
     home_since_ns: int | None = None
     last_tip_world_m: np.ndarray | None = None
     events: list[Event] = field(default_factory=list)
@@ -358,6 +362,11 @@ class Machine:
         if now - cut.stamp_ns < self.s.collect_timeout_s * NS:
             return
         if self._still_attached(rec, cut):
+            if self.s.relook_before_retry and rec.cuts < self.s.max_cut_attempts:
+                self.verify = cut
+                self._start_relook(rec, "still on its branch")
+                self._open_and_leave(now)
+                return
             self._cut_failed(now, "harvest")
             return
         # Not in the basket, and not seen on its branch since the cut: the tools may hide it
@@ -372,6 +381,7 @@ class Machine:
         if self.cut is not None:  # straight from the cut phase: the shears are still closed
             self.tools.append(("open", rec.fruit_id))
         self.cut = self.verify = None
+        self.relook = False
         if rec.cuts < self.s.max_cut_attempts:
             why = f"cut {rec.cuts} failed (fruit still on its branch): retrying"
             self.events.append(Event("replanned", rec.fruit_id, reason=why))
@@ -438,22 +448,17 @@ class Machine:
         the cut failed; not seen ``verify_s`` after arriving → it fell outside the basket."""
         rec, cut = self.target, self.verify
         assert rec is not None and cut is not None
+        if self.relook:
+            self._relooking(now, st, rec)
+            return
         if self._still_attached(rec, cut):
-            self._cut_failed(now, "approach")
+            if self.s.relook_before_retry and rec.cuts < self.s.max_cut_attempts:
+                self._start_relook(rec, "seen on its branch again")
+                self._relooking(now, st, rec)
+            else:
+                self._cut_failed(now, "approach")
             return
-        if not self.looking:  # first back out along the approach line (the fruit may be there)
-            if self._reached(st, self.s.leave_tolerance_m, loose=True) or (
-                now - self.progress.since_ns > self.s.leave_timeout_s * NS
-            ):
-                self.looking = True
-                self.progress = Progress(now, self.next_seq)
-            return
-        if self.arrived_ns is None and (
-            self._reached(st, self.s.home_tolerance_m, loose=True)
-            or now - self.progress.since_ns > self.s.home_timeout_s * NS
-        ):
-            self.arrived_ns = now
-        if self.arrived_ns is not None and now - self.arrived_ns >= self.s.verify_s * NS:
+        if self._arrived_to_look(now, st) and now - self._arrived() >= self.s.verify_s * NS:
             why = f"not in the basket {self.s.collect_timeout_s:.1f} s after the cut, not seen "
             why += "on its branch since"
             self.events.append(Event("fruit_dropped", rec.fruit_id, outcome="dropped", reason=why))
@@ -462,6 +467,51 @@ class Machine:
             self.verify = None
             self.target = None
             self._select(now)
+
+    def _start_relook(self, rec: FruitRecord, seen: str) -> None:
+        why = f"cut {rec.cuts} failed (fruit {seen}): a look from afar first"
+        self.events.append(Event("replanned", rec.fruit_id, reason=why))
+        self.relook = True
+
+    def _relooking(self, now: int, st: ControlStatus, rec: FruitRecord) -> None:
+        """A failed cut, the fruit seen on its branch: at the ready pose, the target is
+        re-planned from the first view the scene computes there (none within ``verify_s``: the
+        estimate stays), then the fruit is approached again."""
+        if not self._arrived_to_look(now, st):
+            return
+        arrived = self._arrived()
+        fresh = rec.seen.last_seen_stamp_ns > arrived
+        moved = self.book.replan_from_view(rec) if fresh else None
+        if moved is None and now - arrived < self.s.verify_s * NS:
+            return
+        self.left_because = (
+            f"re-planned from the view at the ready pose, {moved * 1e3:.0f} mm from the cut's aim"
+            if moved is not None
+            else "no fresh view at the ready pose: the estimate stays"
+        )
+        self._cut_failed(now, "approach")
+
+    def _arrived_to_look(self, now: int, st: ControlStatus) -> bool:
+        """Verifying a cut: back out along the approach line to the pre-pose (the fruit may be
+        there), then on to the ready pose, out of the camera's way. True once there (or timed
+        out getting there); ``arrived_ns`` says since when."""
+        if not self.looking:
+            if self._reached(st, self.s.leave_tolerance_m, loose=True) or (
+                now - self.progress.since_ns > self.s.leave_timeout_s * NS
+            ):
+                self.looking = True
+                self.progress = Progress(now, self.next_seq)
+            return False
+        if self.arrived_ns is None and (
+            self._reached(st, self.s.home_tolerance_m, loose=True)
+            or now - self.progress.since_ns > self.s.home_timeout_s * NS
+        ):
+            self.arrived_ns = now
+        return self.arrived_ns is not None
+
+    def _arrived(self) -> int:
+        assert self.arrived_ns is not None
+        return self.arrived_ns
 
     def _home(self, now: int, st: ControlStatus, basket: int | None) -> None:
         if self._candidates():

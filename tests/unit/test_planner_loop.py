@@ -161,13 +161,29 @@ def test_a_fruit_given_the_id_of_a_harvested_fruit_is_still_harvested(tmp_path: 
     assert (s.detected, s.harvested) == (2, 2)
 
 
-def test_a_failing_cut_is_retried_once_then_the_fruit_is_given_up(tmp_path: Path) -> None:
+@pytest.mark.parametrize("relook", [False, True])
+def test_a_failing_cut_is_retried_once_then_the_fruit_is_given_up(
+    tmp_path: Path, relook: bool
+) -> None:
     # A 1 mm cut tolerance: the tip (within 4 mm of the peduncle) misses every time.
-    r = run_harvest(lab_scenario(tmp_path, [A]), sim={"cut_tolerance_m": 0.001}, max_s=25)
+    r = run_harvest(
+        lab_scenario(tmp_path, [A]),
+        sim={"cut_tolerance_m": 0.001},
+        planner={"relook_before_retry": relook},
+        max_s=25,
+    )
     check_loop_invariants(r)
     assert len(r.sim_events("cut_missed")) == 2 and not r.sim_events("cut")
     assert [e.reason for e in r.events("cut_sent")] == ["cut 1/2", "cut 2/2"]
     assert any("retrying" in e.reason for e in r.events("replanned"))
+    # with relook_before_retry, the tools back out between the cuts to look from the ready
+    # pose and re-plan there
+    looked = any("a look from afar first" in e.reason for e in r.events("replanned"))
+    replanned = any(
+        e.reason.startswith("re-planned from the view at the ready pose")
+        for e in r.events("phase_changed")
+    )
+    assert looked == replanned == relook
     (skip,) = r.events("fruit_skipped")
     assert "cut failed 2 times" in skip.reason
     s = r.summary()
