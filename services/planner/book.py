@@ -230,12 +230,8 @@ class FruitBook:
             return
         if f.frames_unseen == 0 and in_dish(f):
             rec.in_basket = True
-        whole = _whole(f)
+        whole = _whole_for(rec, f)
         planned_m = (rec.planned.d_h_m, rec.planned.d_v_m)
-        if rec.planned_whole and _shrunk(f, planned_m, SHRUNK_VIEW):
-            whole = False
-        if whole and _smaller_than_shown(f, rec.sizes_m):
-            whole = False
         if _this_frames(f):
             rec.sizes_m.append((f.semi_axis_h_m, f.semi_axis_v_m))
         shape = shape_of(f)
@@ -267,9 +263,7 @@ class FruitBook:
         the ready pose after a failed cut. Returns how far the target moved, m (None: no such
         view, the target stays)."""
         f = rec.seen
-        planned_m = (rec.planned.d_h_m, rec.planned.d_v_m)
-        whole = _whole(f) and not _smaller_than_shown(f, rec.sizes_m)
-        whole = whole and not (rec.planned_whole and _shrunk(f, planned_m, SHRUNK_VIEW))
+        whole = _whole_for(rec, f)
         if not _this_frames(f) or (rec.planned_whole and not whole):
             return None
         shape = shape_of(f)
@@ -347,6 +341,15 @@ def _this_frames(f: Fruit) -> bool:
     """The scene computed this estimate from this frame's view (whole or cut on a side):
     nothing kept from an earlier frame."""
     return f.frames_unseen == 0 and set(f.flags) <= CUT_FLAGS
+
+
+def _whole_for(rec: FruitRecord, f: Fruit) -> bool:
+    """A whole view of ``rec``'s fruit: no side cut flagged, and not shrunk against the whole
+    view it was planned from nor against the sizes it has shown lately."""
+    planned_m = (rec.planned.d_h_m, rec.planned.d_v_m)
+    if rec.planned_whole and _shrunk(f, planned_m, SHRUNK_VIEW):
+        return False
+    return _whole(f) and not _smaller_than_shown(f, rec.sizes_m)
 
 
 def _whole(f: Fruit) -> bool:

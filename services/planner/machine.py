@@ -362,7 +362,7 @@ class Machine:
         if now - cut.stamp_ns < self.s.collect_timeout_s * NS:
             return
         if self._still_attached(rec, cut):
-            if self.s.relook_before_retry and rec.cuts < self.s.max_cut_attempts:
+            if self._relook_wanted(rec):
                 self.verify = cut
                 self._start_relook(rec, "still on its branch")
                 self._open_and_leave(now)
@@ -452,13 +452,14 @@ class Machine:
             self._relooking(now, st, rec)
             return
         if self._still_attached(rec, cut):
-            if self.s.relook_before_retry and rec.cuts < self.s.max_cut_attempts:
+            if self._relook_wanted(rec):
                 self._start_relook(rec, "seen on its branch again")
                 self._relooking(now, st, rec)
             else:
                 self._cut_failed(now, "approach")
             return
-        if self._arrived_to_look(now, st) and now - self._arrived() >= self.s.verify_s * NS:
+        arrived = self._arrived_to_look(now, st)
+        if arrived is not None and now - arrived >= self.s.verify_s * NS:
             why = f"not in the basket {self.s.collect_timeout_s:.1f} s after the cut, not seen "
             why += "on its branch since"
             self.events.append(Event("fruit_dropped", rec.fruit_id, outcome="dropped", reason=why))
@@ -467,6 +468,9 @@ class Machine:
             self.verify = None
             self.target = None
             self._select(now)
+
+    def _relook_wanted(self, rec: FruitRecord) -> bool:
+        return self.s.relook_before_retry and rec.cuts < self.s.max_cut_attempts
 
     def _start_relook(self, rec: FruitRecord, seen: str) -> None:
         why = f"cut {rec.cuts} failed (fruit {seen}): a look from afar first"
@@ -477,9 +481,9 @@ class Machine:
         """A failed cut, the fruit seen on its branch: at the ready pose, the target is
         re-planned from the first view the scene computes there (none within ``verify_s``: the
         estimate stays), then the fruit is approached again."""
-        if not self._arrived_to_look(now, st):
+        arrived = self._arrived_to_look(now, st)
+        if arrived is None:
             return
-        arrived = self._arrived()
         fresh = rec.seen.last_seen_stamp_ns > arrived
         moved = self.book.replan_from_view(rec) if fresh else None
         if moved is None and now - arrived < self.s.verify_s * NS:
@@ -491,26 +495,22 @@ class Machine:
         )
         self._cut_failed(now, "approach")
 
-    def _arrived_to_look(self, now: int, st: ControlStatus) -> bool:
+    def _arrived_to_look(self, now: int, st: ControlStatus) -> int | None:
         """Verifying a cut: back out along the approach line to the pre-pose (the fruit may be
-        there), then on to the ready pose, out of the camera's way. True once there (or timed
-        out getting there); ``arrived_ns`` says since when."""
+        there), then on to the ready pose, out of the camera's way. Once there (or timed out
+        getting there): since when (``arrived_ns``); None before."""
         if not self.looking:
             if self._reached(st, self.s.leave_tolerance_m, loose=True) or (
                 now - self.progress.since_ns > self.s.leave_timeout_s * NS
             ):
                 self.looking = True
                 self.progress = Progress(now, self.next_seq)
-            return False
+            return None
         if self.arrived_ns is None and (
             self._reached(st, self.s.home_tolerance_m, loose=True)
             or now - self.progress.since_ns > self.s.home_timeout_s * NS
         ):
             self.arrived_ns = now
-        return self.arrived_ns is not None
-
-    def _arrived(self) -> int:
-        assert self.arrived_ns is not None
         return self.arrived_ns
 
     def _home(self, now: int, st: ControlStatus, basket: int | None) -> None:
