@@ -38,7 +38,7 @@ class PlannerCore:
         self.kin = Kinematics(
             s.reach_yaws_deg, s.reach_iterations, s.reach_tolerance_m, s.ready_pose
         )
-        self.book = FruitBook(s.same_fruit_m, s.replan_distance_m)
+        self.book = FruitBook(s.same_fruit_m, s.replan_distance_m, s.follow_cut_views)
         self.machine = Machine(
             s,
             self.book,

@@ -313,3 +313,100 @@ def test_a_smaller_unflagged_view_is_whole_until_the_fruit_has_shown_its_size() 
     small = fruit(5, (0.807, -0.308, 1.228)).model_copy(update={"semi_axis_h_m": 0.030})
     b.update(scene(small), never)  # too few views to know the fruit's size: a whole view
     assert b.records[5].planned_whole
+
+
+def test_a_target_never_seen_whole_follows_its_views_median_not_one_stray_view() -> None:
+    # orchard seed 4: a fruit with a side always under a leaf (every view edge-flagged). Its
+    # target kept a view 10 mm off while later views read 2-3 mm from the truth (all within
+    # the 1.5 cm re-plan distance of it), then jumped to a view 16 mm off, taken as an arm
+    # passing in front shrank the fruit's box: the cutter missed the peduncle by 27 mm.
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    truth = np.array((0.80, -0.20, 1.20))
+
+    def view(off_m: tuple[float, float, float], h: float) -> Fruit:
+        return fruit(7, tuple(truth + np.array(off_m))).model_copy(
+            update={"semi_axis_h_m": h, "semi_axis_v_m": h, "flags": ("edge_occluded",)}
+        )
+
+    b.update(scene(view((-0.010, 0.0, 0.0), 0.037)), never)  # the first view: 10 mm off
+    r = b.records[7]
+    for k in range(MIN_RECENT_VIEWS + 2):
+        b.update(scene(view((0.0, 0.002 * (-1) ** k, 0.0), 0.044)), never)
+    assert not r.planned_whole
+    assert np.linalg.norm(r.planned.centre_world_m - truth) < 0.003
+    assert r.planned.d_h_m == 0.044
+    b.update(scene(view((-0.012, 0.010, 0.008), 0.029)), never)  # shrunk by an arm: 17 mm off
+    assert np.linalg.norm(r.planned.centre_world_m - truth) < 0.003
+    stale = view((-0.012, 0.010, 0.008), 0.044).model_copy(update={"frames_unseen": 3})
+    b.update(scene(stale), never)  # a kept estimate is no view
+    assert np.linalg.norm(r.planned.centre_world_m - truth) < 0.003
+
+
+def test_a_target_never_seen_whole_moves_with_its_fruit() -> None:
+    # A fruit pushed 3 cm while a leaf hides a side: the target follows within a few views.
+    b = FruitBook(same_fruit_m=0.08, replan_m=0.015)
+    p0, p1 = np.array((0.80, -0.20, 1.20)), np.array((0.80, -0.17, 1.20))
+
+    def view(p: np.ndarray) -> Fruit:
+        return fruit(7, tuple(p)).model_copy(update={"flags": ("edge_occluded",)})
+
+    for _ in range(MIN_RECENT_VIEWS):
+        b.update(scene(view(p0)), never)
+    for _ in range(5):
+        b.update(scene(view(p1)), never)
+    assert np.allclose(b.records[7].planned.centre_world_m, p1)
+    assert [k for k, _ in b.moved] == [7]
+
+
+def test_follow_cut_views_off_keeps_the_rule_before_it() -> None:
+    # The A/B setting: one view straying replan_m moves the target, and nothing nearer does.
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015, follow_cut_views=False)
+    p = np.array((0.80, -0.20, 1.20))
+    cut = ("edge_occluded",)
+    b.update(
+        scene(fruit(7, tuple(p - np.array((0.010, 0, 0)))).model_copy(update={"flags": cut})), never
+    )
+    for _ in range(MIN_RECENT_VIEWS):
+        b.update(scene(fruit(7, tuple(p)).model_copy(update={"flags": cut})), never)
+    assert np.allclose(b.records[7].planned.centre_world_m, p - np.array((0.010, 0, 0)))
+    b.update(
+        scene(fruit(7, tuple(p + np.array((0.006, 0, 0)))).model_copy(update={"flags": cut})), never
+    )
+    assert np.allclose(b.records[7].planned.centre_world_m, p + np.array((0.006, 0, 0)))
+
+
+def test_a_whole_view_the_fruit_has_since_shown_itself_larger_than_was_cut() -> None:
+    # orchard seed 11: the first views, unflagged, read d_h 3.2 cm (an arm over a side, not
+    # flagged), 14 mm off; later edge-flagged views read 4.35 cm, 1 mm off. The target kept
+    # the first ("whole") view and the cutter missed the peduncle by 17 mm.
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    truth = np.array((0.91, 0.20, 1.40))
+    first = fruit(5, tuple(truth + np.array((-0.009, 0.010, 0.0)))).model_copy(
+        update={"semi_axis_h_m": 0.032, "semi_axis_v_m": 0.039}
+    )
+    for _ in range(MIN_RECENT_VIEWS):
+        b.update(scene(first), never)
+    r = b.records[5]
+    assert r.planned_whole
+    later = fruit(5, tuple(truth + np.array((0.001, 0.0, 0.0)))).model_copy(
+        update={"semi_axis_h_m": 0.0435, "semi_axis_v_m": 0.0396, "flags": ("edge_occluded",)}
+    )
+    for _ in range(6):
+        b.update(scene(later), never)
+    assert not r.planned_whole
+    assert np.linalg.norm(r.planned.centre_world_m - truth) < 0.002
+    assert r.planned.d_h_m == 0.0435
+
+
+def test_a_whole_view_is_kept_while_the_fruit_shows_no_larger() -> None:
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    p = np.array((0.91, 0.20, 1.40))
+    for _ in range(MIN_RECENT_VIEWS):
+        b.update(scene(fruit(5, tuple(p))), never)
+    cut = fruit(5, tuple(p + np.array((0.008, 0.0, 0.0)))).model_copy(
+        update={"semi_axis_h_m": 0.041, "flags": ("edge_occluded",)}
+    )
+    for _ in range(20):
+        b.update(scene(cut), never)
+    r = b.records[5]
+    assert r.planned_whole and np.allclose(r.planned.centre_world_m, p)
