@@ -319,11 +319,12 @@ class Settings(ServiceSettings):
         "perception noise does not shake the target, m.",
     )
     follow_cut_views: bool = Field(
-        default=True,
+        default=False,
         description="A target with no whole view (none yet, or one the fruit has since shown "
         "itself larger than) follows the median of its last fresh views of its own size "
         "(planner README, 'The target'); false: it moves only when one view strays "
-        "replan_distance_m from it, and takes that view (the rule before session 17).",
+        "replan_distance_m from it, and takes that view. Off by default: BENCHMARKS.md, Harvest, "
+        "session 17.",
     )
     same_fruit_m: float = Field(
         default=0.04,

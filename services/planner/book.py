@@ -19,11 +19,11 @@ list, with the identity rules the harvest needs.
   cut one unless that view puts the fruit more than ``MOVED_VIEW_M`` away (a fruit pushed aside).
   An unflagged view much smaller than the fruit has shown lately is no whole view: a fruit does
   not shrink, so something the scene did not flag (a leaf, a hand) cut it.
-* A target the scene has never shown whole (a side always hidden by a leaf, common in the
-  orchard) follows the median of its last ``CUT_VIEWS`` fresh views that are not smaller than
-  the fruit has shown, once that median is ``REFINE_M`` from it: no single view moves it. A
-  "whole" view the fruit has since shown itself larger than was cut: its target is followed
-  the same way.
+* With ``follow_cut_views`` (opt-in): a target the scene has never shown whole (a side always
+  hidden by a leaf, common in the orchard) follows the median of its last ``CUT_VIEWS`` fresh
+  views that are not smaller than the fruit has shown, once that median is ``REFINE_M`` from
+  it: no single view moves it. A "whole" view the fruit has since shown itself larger than was
+  cut: its target is followed the same way.
 """
 
 from __future__ import annotations
@@ -153,7 +153,7 @@ class FruitBook:
 
     same_fruit_m: float
     replan_m: float
-    follow_cut_views: bool = True  # False: the rule before session 17 (one stray view moves it)
+    follow_cut_views: bool = False  # True: ``CUT_VIEWS`` (opt-in: planner.follow_cut_views)
     records: dict[int, FruitRecord] = field(default_factory=dict)
     id_to_key: dict[int, int] = field(default_factory=dict)
     dish_at: dict[int, DishPose] = field(default_factory=dict)  # camera stamp → dish
@@ -250,13 +250,15 @@ class FruitBook:
         if f.frames_unseen == 0 and in_dish(f):
             rec.in_basket = True
         planned_m = (rec.planned.d_h_m, rec.planned.d_v_m)
+        whole = _whole_for(rec, f)  # against the sizes shown before this view
         if _this_frames(f):
             rec.sizes_m.append((f.semi_axis_h_m, f.semi_axis_v_m))
-        if self.follow_cut_views and rec.planned_whole and _planned_smaller(rec):
-            rec.planned_whole = False  # its "whole" view was cut: followed as a cut one now
-        whole = _whole_for(rec, f)
-        if not whole and _this_frames(f) and not _smaller_than_shown(f, rec.sizes_m):
-            rec.cut_views.append(shape_of(f))
+        if self.follow_cut_views:  # its rules take this view's size in (as measured)
+            if rec.planned_whole and _planned_smaller(rec):
+                rec.planned_whole = False  # its "whole" view was cut: followed as a cut one
+            whole = _whole_for(rec, f)
+            if not whole and _this_frames(f) and not _smaller_than_shown(f, rec.sizes_m):
+                rec.cut_views.append(shape_of(f))
         shape = shape_of(f)
         d = float(np.linalg.norm(shape.centre_world_m - rec.planned.centre_world_m))
         if rec.planned_whole and not whole:

@@ -320,7 +320,7 @@ def test_a_target_never_seen_whole_follows_its_views_median_not_one_stray_view()
     # target kept a view 10 mm off while later views read 2-3 mm from the truth (all within
     # the 1.5 cm re-plan distance of it), then jumped to a view 16 mm off, taken as an arm
     # passing in front shrank the fruit's box: the cutter missed the peduncle by 27 mm.
-    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015, follow_cut_views=True)
     truth = np.array((0.80, -0.20, 1.20))
 
     def view(off_m: tuple[float, float, float], h: float) -> Fruit:
@@ -344,7 +344,7 @@ def test_a_target_never_seen_whole_follows_its_views_median_not_one_stray_view()
 
 def test_a_target_never_seen_whole_moves_with_its_fruit() -> None:
     # A fruit pushed 3 cm while a leaf hides a side: the target follows within a few views.
-    b = FruitBook(same_fruit_m=0.08, replan_m=0.015)
+    b = FruitBook(same_fruit_m=0.08, replan_m=0.015, follow_cut_views=True)
     p0, p1 = np.array((0.80, -0.20, 1.20)), np.array((0.80, -0.17, 1.20))
 
     def view(p: np.ndarray) -> Fruit:
@@ -379,7 +379,7 @@ def test_a_whole_view_the_fruit_has_since_shown_itself_larger_than_was_cut() -> 
     # orchard seed 11: the first views, unflagged, read d_h 3.2 cm (an arm over a side, not
     # flagged), 14 mm off; later edge-flagged views read 4.35 cm, 1 mm off. The target kept
     # the first ("whole") view and the cutter missed the peduncle by 17 mm.
-    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015, follow_cut_views=True)
     truth = np.array((0.91, 0.20, 1.40))
     first = fruit(5, tuple(truth + np.array((-0.009, 0.010, 0.0)))).model_copy(
         update={"semi_axis_h_m": 0.032, "semi_axis_v_m": 0.039}
@@ -399,7 +399,7 @@ def test_a_whole_view_the_fruit_has_since_shown_itself_larger_than_was_cut() -> 
 
 
 def test_a_whole_view_is_kept_while_the_fruit_shows_no_larger() -> None:
-    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015, follow_cut_views=True)
     p = np.array((0.91, 0.20, 1.40))
     for _ in range(MIN_RECENT_VIEWS):
         b.update(scene(fruit(5, tuple(p))), never)
