@@ -369,33 +369,39 @@ def _shrunk(f: Fruit, size_m: tuple[float, float], share: float) -> bool:
     """Either semi-axis of the view below ``share`` of ``size_m`` (d_h, d_v): a view cut by
     something (the top hidden, paper-exp2 seed 12: d_v 1.7 cm of 3.6, the centre 2 cm low,
     and the cuts went 1.6 cm under the peduncle)."""
-    d_h_m, d_v_m = size_m
-    return f.semi_axis_h_m < share * d_h_m or f.semi_axis_v_m < share * d_v_m
+    return _below((f.semi_axis_h_m, f.semi_axis_v_m), size_m, share)
 
 
-def _smaller_than_shown(f: Fruit, sizes_m: deque[tuple[float, float]]) -> bool:
-    """A semi-axis of the view below ``SHRUNK_VIEW`` of the size the fruit has shown in its
-    recent views (``SEEN_SIZE_QUANTILE``), whatever their flags: a fruit does not shrink, so
-    the view is cut by something the scene did not flag (paper-exp1 seed 11: a fruit half
-    hidden by a leaf showed 4.0 x 4.0 cm for 3 s in edge-flagged views, truth 4.1 x 3.85, then
-    one unflagged 3.0 x 3.3 cm view while a hand passed; planned from it as from a whole view,
-    the cuts missed the peduncle by 1.7 cm)."""
+def _below(size_m: tuple[float, float], ref_m: tuple[float, float], share: float) -> bool:
+    """Either semi-axis (d_h, d_v) of ``size_m`` below ``share`` of ``ref_m``'s."""
+    return size_m[0] < share * ref_m[0] or size_m[1] < share * ref_m[1]
+
+
+def _below_shown(size_m: tuple[float, float], sizes_m: deque[tuple[float, float]]) -> bool:
+    """``size_m`` (d_h, d_v) below ``SHRUNK_VIEW`` of the size the fruit has shown in its recent
+    views (``SEEN_SIZE_QUANTILE``, whatever their flags; False until ``MIN_RECENT_VIEWS``)."""
     if len(sizes_m) < MIN_RECENT_VIEWS:
         return False
     h_m, v_m = np.percentile(np.array(sizes_m), SEEN_SIZE_QUANTILE, axis=0)
-    return _shrunk(f, (float(h_m), float(v_m)), SHRUNK_VIEW)
+    return _below(size_m, (float(h_m), float(v_m)), SHRUNK_VIEW)
+
+
+def _smaller_than_shown(f: Fruit, sizes_m: deque[tuple[float, float]]) -> bool:
+    """The view below the size the fruit has shown (``_below_shown``): a fruit does not shrink,
+    so the view is cut by something the scene did not flag (paper-exp1 seed 11: a fruit half
+    hidden by a leaf showed 4.0 x 4.0 cm for 3 s in edge-flagged views, truth 4.1 x 3.85, then
+    one unflagged 3.0 x 3.3 cm view while a hand passed; planned from it as from a whole view,
+    the cuts missed the peduncle by 1.7 cm)."""
+    return _below_shown((f.semi_axis_h_m, f.semi_axis_v_m), sizes_m)
 
 
 def _planned_smaller(rec: FruitRecord) -> bool:
-    """The view ``rec``'s target was planned from is below ``SHRUNK_VIEW`` of the size the fruit
-    has shown since (``SEEN_SIZE_QUANTILE`` of its recent views, flags or not): that view was cut
-    by something the scene did not flag (orchard seed 11: the first views, unflagged, read d_h
-    3.2 cm with an arm over a side, 14 mm off; the target stayed there while later edge-flagged
-    views read 4.35 cm, 1 mm off, and the cutter missed the peduncle by 17 mm)."""
-    if len(rec.sizes_m) < MIN_RECENT_VIEWS:
-        return False
-    h_m, v_m = np.percentile(np.array(rec.sizes_m), SEEN_SIZE_QUANTILE, axis=0)
-    return rec.planned.d_h_m < SHRUNK_VIEW * h_m or rec.planned.d_v_m < SHRUNK_VIEW * v_m
+    """The view ``rec``'s target was planned from is below the size the fruit has shown since
+    (``_below_shown``): that view was cut by something the scene did not flag (orchard seed 11:
+    the first views, unflagged, read d_h 3.2 cm with an arm over a side, 14 mm off; the target
+    stayed there while later edge-flagged views read 4.35 cm, 1 mm off, and the cutter missed
+    the peduncle by 17 mm)."""
+    return _below_shown((rec.planned.d_h_m, rec.planned.d_v_m), rec.sizes_m)
 
 
 def _this_frames(f: Fruit) -> bool:
