@@ -201,6 +201,7 @@ class SceneCore:
         # target (its order may differ from nearest-first), across its ID switches.
         if ev.event == "fruit_selected" or (ev.event == "replanned" and self.target is not None):
             self.target = ev.fruit_id
+            self.fruits.unmark(ev.fruit_id)
         elif ev.fruit_id == self.target and ev.event in (
             *HARVESTED_EVENTS,
             "fruit_skipped",

@@ -64,7 +64,9 @@ class FruitList:
     def __init__(self, p: ListParams) -> None:
         self.p = p
         self.entries: dict[int, Entry] = {}
-        self.marks: dict[int, Mark] = {}  # kept after an entry is forgotten: IDs are not reused
+        # Kept after an entry is forgotten (a harvested fruit seen again in the basket stays
+        # harvested); cleared when the planner targets the ID again (``unmark``).
+        self.marks: dict[int, Mark] = {}
 
     def step(
         self,
@@ -121,6 +123,14 @@ class FruitList:
         """The planner's mark; harvested wins over unreachable (a fruit can be retried)."""
         if self.marks.get(fruit_id) != "harvested":
             self.marks[fruit_id] = mark
+
+    def unmark(self, fruit_id: int) -> None:
+        """The planner targets ``fruit_id`` again: the tracker re-attached the track of a fruit
+        that is gone to another fruit, which the planner found still to harvest (its book keeps
+        the identity). The mark was the old fruit's: kept, it would hide the target from
+        ``selected`` and its working space would fill with occupied space (orchard seed 10: the
+        tools stopped 13 cm short of a fruit reached on another run and gave it up)."""
+        self.marks.pop(fruit_id, None)
 
     def selected(self, target: int | None = None) -> int | None:
         """The planner's current target when it is listed and unmarked; otherwise the nearest

@@ -125,3 +125,38 @@ def test_the_obstacle_radius_follows_the_planners_target() -> None:
     done = ev.model_copy(update={"event": "fruit_collected", "outcome": "harvested"})
     core.handle("harvest/events", done)
     assert step(4).selected_fruit_id == 1
+
+
+def test_a_target_on_a_harvested_fruits_id_is_the_target_again() -> None:
+    """The tracker may give a harvested fruit's track ID to another fruit. When the planner
+    selects that ID, the scene follows it (its working space kept free of occupied space, its
+    ellipsoid an obstacle again) instead of the old fruit's mark hiding it."""
+    from schemas.harvest import HarvestEvent
+
+    s = Scene()
+    s.ellipsoid((-0.1, 0.0, 0.5), a=0.04, c=0.04, label=1)
+    s.ellipsoid((0.1, 0.0, 0.8), a=0.04, c=0.04, label=2)
+    core = SceneCore(load_settings(Settings, {}))
+
+    def step(stamp: int) -> object:
+        core.handle("camera/rgbd", s.frame(seq=stamp, stamp_ns=stamp))
+        boxes = {1: s.box(1), 2: s.box(2)}
+        ((_, state),) = core.handle("perception/tracks", tracks(stamp, stamp, stamp, boxes))
+        return state
+
+    def event(stamp: int, name: str, fruit_id: int, outcome: str | None = None) -> None:
+        h = Header(stamp_ns=stamp, seq=stamp, source="planner")
+        ev = HarvestEvent(header=h, event=name, fruit_id=fruit_id, outcome=outcome)
+        core.handle("harvest/events", ev)
+
+    step(1)
+    event(2, "fruit_selected", 2)
+    event(3, "fruit_collected", 2, "harvested")  # ID 2 now names the fruit that hung at 2
+    st = step(4)
+    assert st.selected_fruit_id == 1
+    assert 2 not in {e.fruit_id for e in st.obstacles.ellipsoids}
+    event(5, "fruit_selected", 2)  # the planner's book: ID 2 is on a fruit still to harvest
+    st = step(6)
+    assert st.selected_fruit_id == 2
+    assert 2 in {e.fruit_id for e in st.obstacles.ellipsoids}
+    assert core.fruits.marks.get(2) is None
