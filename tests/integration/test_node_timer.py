@@ -62,12 +62,15 @@ def test_live_node_calls_the_timer_between_inputs_and_publishes_its_outputs(
     try:
         pub = me.publisher("demo/tick")
         pub.put(DemoTick(header=Header(stamp_ns=0, seq=0, source="t"), tick=0, value=0.0))
-        wait_until(lambda: core.inputs == 1 and len(got) >= 3, 10, "an input and 3 timer outputs")
+        wait_until(lambda: core.inputs == 1 and len(got) >= 5, 10, "an input and 5 timer outputs")
     finally:
         node.stop()
         worker.join(timeout=5)
         node.close()
-    gaps_ms = [(b - a) / 1e6 for a, b in zip(core.timer_calls, core.timer_calls[1:], strict=False)]
-    # About every 20 ms at a fixed phase (a late call is followed by a sooner one), never a
-    # burst of catch-up calls back to back (a loaded machine delays calls; no tighter bound).
-    assert all(g >= 2 for g in gaps_ms), gaps_ms
+    calls = core.timer_calls
+    # Fixed phase: a late call may be followed by a sooner one (0.2 ms later on a loaded
+    # machine, measured), but never a burst of catch-up calls: any two calls apart by one
+    # call are at least a period apart, however late each is (the next slot is never before
+    # the last call). No upper bound: a loaded machine delays calls.
+    spans_ms = [(c - a) / 1e6 for a, c in zip(calls, calls[2:], strict=False)]
+    assert len(spans_ms) >= 3 and all(s >= 19.0 for s in spans_ms), spans_ms
