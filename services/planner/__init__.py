@@ -326,6 +326,14 @@ class Settings(ServiceSettings):
         "replan_distance_m from it, and takes that view. Off by default: BENCHMARKS.md, Harvest, "
         "session 17.",
     )
+    target_hangs_over_dish: bool = Field(
+        default=False,
+        description="The fruit the tools go for (approach, harvest) is never taken for one in "
+        "the basket when the scene sees it in our dish: the dish is under it by design (false: "
+        "a target seen there, say with the dish pushed up under it in a stalled harvest, is "
+        "marked in the basket, then never tried again nor avoided). Off by default until "
+        "measured over the orchard's 20 seeds (BENCHMARKS.md, Harvest, session 18).",
+    )
     same_fruit_m: float = Field(
         default=0.04,
         gt=0,

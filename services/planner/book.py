@@ -112,6 +112,9 @@ class FruitRecord:
     cuts: int = 0
     losses: int = 0
     frozen: bool = False  # cutting or leaving: the planning position no longer follows the scene
+    # The tools go for it (approach, harvest; planner.target_hangs_over_dish): our dish is under
+    # it by design, so a sighting in the dish is of the fruit hanging over it, not in the basket.
+    hanging: bool = False
     planned_whole: bool = False  # ``planned`` comes from a whole view (no side cut, fresh)
     pushed: bool = False  # since then moved by cut views (``MOVED_VIEW_M``): followed closely
     scene_mark_ok: bool = True  # False: its ID was another fruit's, whose scene mark it carries
@@ -247,7 +250,7 @@ class FruitBook:
         rec.seen = f
         if rec.finished or rec.frozen:
             return
-        if f.frames_unseen == 0 and in_dish(f):
+        if f.frames_unseen == 0 and in_dish(f) and not rec.hanging:
             rec.in_basket = True
         planned_m = (rec.planned.d_h_m, rec.planned.d_v_m)
         whole = _whole_for(rec, f)  # against the sizes shown before this view
