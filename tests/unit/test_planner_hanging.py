@@ -4,46 +4,22 @@ fruit, marked it in the basket; it was never tried again, nor avoided)."""
 
 from __future__ import annotations
 
-from schemas.base import Header
-from schemas.scene import Fruit, Obstacles, SceneState, Trunk
 from services.planner import Settings
 from services.planner.book import MIN_SIGHTINGS
 from services.planner.core import PlannerCore
 from services.planner.kinematics import ReachVerdict
 from services.runtime.settings import load_settings
+from tests.unit.test_planner_book import fruit, scene
 
 OK = ReachVerdict(True, 0.0, 0.0, 0.0)
 P = (0.88, 0.25, 1.31)
-
-
-def fruit(fid: int) -> Fruit:
-    return Fruit(
-        fruit_id=fid,
-        position_cam_m=(0.0, 0.0, 0.9),
-        position_world_m=P,
-        semi_axis_h_m=0.04,
-        semi_axis_v_m=0.04,
-        distance_m=0.9,
-        status="candidate",
-        frames_unseen=0,
-        last_seen_stamp_ns=0,
-    )
-
-
-def scene(seq: int) -> SceneState:
-    return SceneState(
-        header=Header(stamp_ns=seq, seq=seq, source="scene"),
-        fruits=(fruit(12),),
-        trunk=Trunk(found=False),
-        obstacles=Obstacles(),
-    )
 
 
 def harvesting(on: bool) -> PlannerCore:
     """A core whose one fruit (ID 12) is selected and in the harvest phase."""
     core = PlannerCore(load_settings(Settings, {"target_hangs_over_dish": on}))
     for seq in range(MIN_SIGHTINGS):
-        core.book.update(scene(seq), lambda _f, resting=False: False)
+        core.book.update(scene(fruit(12, P), seq=seq), lambda _f, resting=False: False)
     core.book.records[12].reach = (OK, OK)
     m = core.machine
     m._select(0)
@@ -53,7 +29,7 @@ def harvesting(on: bool) -> PlannerCore:
 
 
 def seen_in_dish(core: PlannerCore) -> bool:
-    core.book.update(scene(100), lambda _f, resting=False: True)  # the dish under it
+    core.book.update(scene(fruit(12, P), seq=100), lambda _f, resting=False: True)  # dish under
     return core.book.records[12].in_basket
 
 

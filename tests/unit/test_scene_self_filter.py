@@ -105,10 +105,7 @@ def test_the_obstacle_radius_follows_the_planners_target() -> None:
     core = SceneCore(load_settings(Settings, {}))
 
     def step(stamp: int) -> object:
-        core.handle("camera/rgbd", s.frame(seq=stamp, stamp_ns=stamp))
-        boxes = {1: s.box(1), 2: s.box(2)}
-        ((_, state),) = core.handle("perception/tracks", tracks(stamp, stamp, stamp, boxes))
-        return state
+        return _two_fruit_state(core, s, stamp)
 
     assert step(1).selected_fruit_id == 1  # nearest first (the paper)
     ev = HarvestEvent(
@@ -139,10 +136,7 @@ def test_a_target_on_a_harvested_fruits_id_is_the_target_again() -> None:
     core = SceneCore(load_settings(Settings, {}))
 
     def step(stamp: int) -> object:
-        core.handle("camera/rgbd", s.frame(seq=stamp, stamp_ns=stamp))
-        boxes = {1: s.box(1), 2: s.box(2)}
-        ((_, state),) = core.handle("perception/tracks", tracks(stamp, stamp, stamp, boxes))
-        return state
+        return _two_fruit_state(core, s, stamp)
 
     def event(stamp: int, name: str, fruit_id: int, outcome: str | None = None) -> None:
         h = Header(stamp_ns=stamp, seq=stamp, source="planner")
@@ -160,3 +154,11 @@ def test_a_target_on_a_harvested_fruits_id_is_the_target_again() -> None:
     assert st.selected_fruit_id == 2
     assert 2 in {e.fruit_id for e in st.obstacles.ellipsoids}
     assert core.fruits.marks.get(2) is None
+
+
+def _two_fruit_state(core: SceneCore, s: Scene, stamp: int) -> object:
+    """One frame and the tracks of labels 1 and 2 (IDs 1 and 2): the scene state."""
+    core.handle("camera/rgbd", s.frame(seq=stamp, stamp_ns=stamp))
+    boxes = {1: s.box(1), 2: s.box(2)}
+    ((_, state),) = core.handle("perception/tracks", tracks(stamp, stamp, stamp, boxes))
+    return state
