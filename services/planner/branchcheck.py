@@ -98,7 +98,13 @@ class BranchCheck:
         now = scene.header.stamp_ns
         if self.start_ns is None:
             self.start_ns = now
-        listed = scene.obstacles.spheres + scene.spheres_near_selected
+        # A centre so far out that its cell overflows is no branch near the robot (the codec
+        # admits any finite float): left out rather than crash the planner.
+        listed = tuple(
+            s
+            for s in scene.obstacles.spheres + scene.spheres_near_selected
+            if np.all(np.isfinite(np.asarray(s.center_world_m) / self.cell_m))
+        )
         keys = [self._cell(s) for s in listed]
         first = {k: self.first_listed_ns.get(k, now) for k in keys}
         self.first_listed_ns = first
