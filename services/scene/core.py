@@ -22,6 +22,7 @@ inside the arms' capsules are dropped and counted (``fruit_on_robot``).
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from collections import Counter, OrderedDict, deque
 from typing import Any
@@ -125,6 +126,7 @@ class SceneCore:
             else None
         )
         self.target: int | None = None  # the planner's current fruit (harvest/events)
+        self.cut_entry: Entry | None = None  # the target as it hung when the cut was sent
         self.body = RobotBody() if s.robot_self_filter else None
         self.joints: OrderedDict[int, JointState] = OrderedDict()  # stamp → joint state
         self.newest_joint_ns: int | None = None
@@ -194,7 +196,7 @@ class SceneCore:
 
     def _take_event(self, ev: HarvestEvent) -> None:
         if ev.event == "run_finished":
-            self.target = None
+            self.target, self.cut_entry = None, None
         if ev.fruit_id is None:
             return
         # The obstacle radius is the paper's for the fruit being harvested: follow the planner's
@@ -208,6 +210,7 @@ class SceneCore:
             "fruit_lost",
         ):
             self.target = None
+        self._freeze_at_cut(ev)
         if ev.event in HARVESTED_EVENTS:
             self.fruits.mark(ev.fruit_id, "harvested")
             self.counters["mark_harvested"] += 1
@@ -363,11 +366,29 @@ class SceneCore:
             log.info("%s", note)
         return mask
 
+    def _freeze_at_cut(self, ev: HarvestEvent) -> None:
+        """From the cut to the end of the attempt the target's working space (keep-out sphere,
+        trunk radius) stays where the fruit hung, as the planner's frozen target does: the
+        estimate follows the falling fruit into the dish, and a trunk obstacle resized for
+        it pushed the dish 16 mm aside while the fruit settled (orchard seed 18). A retry
+        (``replanned``) re-aims at the fruit as seen then."""
+        if ev.event == "cut_sent" and self.target is not None and ev.fruit_id == self.target:
+            e = self.fruits.entries.get(self.target)
+            self.cut_entry = dataclasses.replace(e) if e is not None else None
+        elif (
+            ev.event == "replanned"
+            or self.target is None
+            or (self.cut_entry is not None and self.cut_entry.fruit_id != self.target)
+        ):
+            self.cut_entry = None
+
     # ---- output --------------------------------------------------------------------------------
     def _state(self, tracks: Tracks, problem: str) -> SceneState:
         entries = self.fruits.sorted_entries()
         selected_id = self.fruits.selected(self.target)
         selected = self.fruits.entries.get(selected_id) if selected_id is not None else None
+        if self.cut_entry is not None:
+            selected_id, selected = self.cut_entry.fruit_id, self.cut_entry
         fruits = tuple(self._fruit(e, selected_id) for e in entries)
         harvested = {k for k, m in self.fruits.marks.items() if m == "harvested"}
         obstacles = build_obstacles(
