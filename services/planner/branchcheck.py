@@ -100,12 +100,9 @@ class BranchCheck:
             self.start_ns = now
         # A centre so far out that its cell overflows is no branch near the robot (the codec
         # admits any finite float): left out rather than crash the planner.
-        listed = tuple(
-            s
-            for s in scene.obstacles.spheres + scene.spheres_near_selected
-            if np.all(np.isfinite(np.asarray(s.center_world_m) / self.cell_m))
-        )
-        keys = [self._cell(s) for s in listed]
+        cells = [(s, self._cell(s)) for s in scene.obstacles.spheres + scene.spheres_near_selected]
+        listed = tuple(s for s, k in cells if k is not None)
+        keys = [k for _, k in cells if k is not None]
         first = {k: self.first_listed_ns.get(k, now) for k in keys}
         self.first_listed_ns = first
         start_ns = self.start_ns + round(START_S * 1e9)
@@ -116,8 +113,11 @@ class BranchCheck:
         )
         self.young = len(listed) - len(self.spheres)
 
-    def _cell(self, s: SphereObstacle) -> tuple[int, int, int]:
-        i, j, k = (int(v) for v in np.floor(np.asarray(s.center_world_m) / self.cell_m))
+    def _cell(self, s: SphereObstacle) -> tuple[int, int, int] | None:
+        scaled = np.asarray(s.center_world_m) / self.cell_m
+        if not np.all(np.isfinite(scaled)):
+            return None
+        i, j, k = (int(v) for v in np.floor(scaled))
         return i, j, k
 
     def in_the_way(self, fruit: FruitShape) -> tuple[SphereObstacle, ...]:
