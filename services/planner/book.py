@@ -112,9 +112,6 @@ class FruitRecord:
     cuts: int = 0
     losses: int = 0
     frozen: bool = False  # cutting or leaving: the planning position no longer follows the scene
-    # The tools go for it (approach, harvest; planner.target_hangs_over_dish): our dish is under
-    # it by design, so a sighting in the dish is of the fruit hanging over it, not in the basket.
-    hanging: bool = False
     planned_whole: bool = False  # ``planned`` comes from a whole view (no side cut, fresh)
     pushed: bool = False  # since then moved by cut views (``MOVED_VIEW_M``): followed closely
     scene_mark_ok: bool = True  # False: its ID was another fruit's, whose scene mark it carries
@@ -163,6 +160,9 @@ class FruitBook:
     switches: list[tuple[int, int, int]] = field(default_factory=list)  # (key, old, new)
     moved: list[tuple[int, float]] = field(default_factory=list)  # (key, metres)
     reborn: list[tuple[int, int, int]] = field(default_factory=list)  # (old key, new key, ID)
+    # The record the tools go for (approach, harvest; planner.target_hangs_over_dish): our dish
+    # is under it by design, so a sighting of it in the dish is not of a fruit in the basket.
+    hanging_key: int | None = None
 
     def update(self, scene: SceneState, in_dish: InDish) -> None:
         """Take one scene state: new IDs, switches, positions, what is in the scene now."""
@@ -250,7 +250,7 @@ class FruitBook:
         rec.seen = f
         if rec.finished or rec.frozen:
             return
-        if f.frames_unseen == 0 and in_dish(f) and not rec.hanging:
+        if f.frames_unseen == 0 and in_dish(f) and rec.key != self.hanging_key:
             rec.in_basket = True
         planned_m = (rec.planned.d_h_m, rec.planned.d_v_m)
         whole = _whole_for(rec, f)  # against the sizes shown before this view

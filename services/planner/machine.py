@@ -745,8 +745,7 @@ class Machine:
         """Only the fruit the tools go for now hangs over our dish (orchard seed 14: a harvest
         that stalled with the dish 35 mm short under the fruit saw it "in the dish"; marked in
         the basket, it was never tried again, nor avoided)."""
-        for r in self.book.records.values():
-            r.hanging = r is rec
+        self.book.hanging_key = rec.key if rec is not None else None
 
     def _go_home(self, now: int) -> None:
         if self.phase != "home":

@@ -48,9 +48,11 @@ def test_off_the_target_seen_in_the_dish_is_marked_in_the_basket_as_before() -> 
 
 def test_only_the_current_target_in_approach_or_harvest_hangs() -> None:
     core = harvesting(True)
-    rec, m = core.book.records[12], core.machine
-    assert rec.hanging
+    book, m = core.book, core.machine
+    assert book.hanging_key == book.records[12].key
     m._enter("leave", 2)
-    assert not rec.hanging
-    m._enter("home", 3)
-    assert not rec.hanging and not any(r.hanging for r in core.book.records.values())
+    assert book.hanging_key is None
+    m._enter("approach", 3)
+    assert book.hanging_key == book.records[12].key
+    m._enter("home", 4)
+    assert book.hanging_key is None
