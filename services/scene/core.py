@@ -375,20 +375,20 @@ class SceneCore:
         if ev.event == "cut_sent" and self.target is not None and ev.fruit_id == self.target:
             e = self.fruits.entries.get(self.target)
             self.cut_entry = dataclasses.replace(e) if e is not None else None
-        elif (
-            ev.event == "replanned"
-            or self.target is None
-            or (self.cut_entry is not None and self.cut_entry.fruit_id != self.target)
+        elif self.cut_entry is not None and (
+            ev.event == "replanned" or self.cut_entry.fruit_id != self.target
         ):
-            self.cut_entry = None
+            self.cut_entry = None  # a retry, or the attempt ended (the target changed or None)
 
     # ---- output --------------------------------------------------------------------------------
     def _state(self, tracks: Tracks, problem: str) -> SceneState:
         entries = self.fruits.sorted_entries()
-        selected_id = self.fruits.selected(self.target)
-        selected = self.fruits.entries.get(selected_id) if selected_id is not None else None
         if self.cut_entry is not None:
-            selected_id, selected = self.cut_entry.fruit_id, self.cut_entry
+            selected_id: int | None = self.cut_entry.fruit_id
+            selected: Entry | None = self.cut_entry
+        else:
+            selected_id = self.fruits.selected(self.target)
+            selected = self.fruits.entries.get(selected_id) if selected_id is not None else None
         fruits = tuple(self._fruit(e, selected_id) for e in entries)
         harvested = {k for k, m in self.fruits.marks.items() if m == "harvested"}
         obstacles = build_obstacles(

@@ -181,7 +181,7 @@ def test_the_working_space_stays_where_the_target_hung_from_the_cut() -> None:
     event(1, "fruit_selected")
     r_hung = trunk_radius(hung, 2)
     assert abs(trunk_radius(fallen, 3) - r_hung) > 0.02  # before the cut it follows the fruit
-    trunk_radius(hung, 4)
+    trunk_radius(hung, 4)  # back where it hangs when the cut is sent
     event(5, "cut_sent")
     assert trunk_radius(fallen, 6) == r_hung
     assert core.fruits.entries[2].state.position_cam_m[2] < 0.79  # the estimate did move
