@@ -326,6 +326,13 @@ class Settings(ServiceSettings):
         "replan_distance_m from it, and takes that view. Off by default: BENCHMARKS.md, Harvest, "
         "session 17.",
     )
+    hold_cut_views_in_harvest: bool = Field(
+        default=False,
+        description="With follow_cut_views: the target stops following its cut views once the "
+        "harvest phase starts, and takes them up again at the next approach. The tools are then "
+        "in front of the fruit, and a view they cut can still be of the fruit's own size. Off by "
+        "default: BENCHMARKS.md, Harvest, session 20.",
+    )
     target_hangs_over_dish: bool = Field(
         default=False,
         description="The fruit the tools go for (approach, harvest) is never taken for one in "

@@ -163,6 +163,9 @@ class FruitBook:
     # The record the tools go for (approach, harvest; planner.target_hangs_over_dish): our dish
     # is under it by design, so a sighting of it in the dish is not of a fruit in the basket.
     hanging_key: int | None = None
+    # The record in the harvest phase (planner.hold_cut_views_in_harvest): its cut views are
+    # neither kept nor followed while the tools are in front of it.
+    held_key: int | None = None
 
     def update(self, scene: SceneState, in_dish: InDish) -> None:
         """Take one scene state: new IDs, switches, positions, what is in the scene now."""
@@ -260,7 +263,8 @@ class FruitBook:
             if rec.planned_whole and _planned_smaller(rec):
                 rec.planned_whole = False  # its "whole" view was cut: followed as a cut one
             whole = _whole_for(rec, f)
-            if not whole and _this_frames(f) and not _smaller_than_shown(f, rec.sizes_m):
+            held = rec.key == self.held_key
+            if not (whole or held) and _this_frames(f) and not _smaller_than_shown(f, rec.sizes_m):
                 rec.cut_views.append(shape_of(f))
         shape = shape_of(f)
         d = float(np.linalg.norm(shape.centre_world_m - rec.planned.centre_world_m))
@@ -278,7 +282,8 @@ class FruitBook:
                 self.moved.append((rec.key, d))
             return
         if not whole and not rec.planned_whole and self.follow_cut_views:
-            self._follow_cut_views(rec)
+            if rec.key != self.held_key:
+                self._follow_cut_views(rec)
             return
         if d > self.replan_m or (whole and not rec.planned_whole):
             rec.planned = shape

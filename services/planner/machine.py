@@ -734,6 +734,8 @@ class Machine:
         self.phase = phase
         if self.s.target_hangs_over_dish:
             self._mark_hanging(rec if phase in ("approach", "harvest") else None)
+        if self.s.hold_cut_views_in_harvest:
+            self.book.held_key = rec.key if phase == "harvest" and rec is not None else None
         self.progress = Progress(now, self.next_seq)
         self.arrived_ns = None
         self.looking = False

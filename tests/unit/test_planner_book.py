@@ -6,8 +6,11 @@ import numpy as np
 
 from schemas.base import Header
 from schemas.scene import Fruit, Obstacles, SceneState, Trunk
+from services.planner import Settings
 from services.planner.book import MIN_RECENT_VIEWS, MIN_SIGHTINGS, FruitBook, inside_dish
-from services.planner.kinematics import DishPose
+from services.planner.core import PlannerCore
+from services.planner.kinematics import DishPose, ReachVerdict
+from services.runtime.settings import load_settings
 
 
 def fruit(fid: int, p: tuple[float, float, float], unseen: int = 0, stamp: int = 0) -> Fruit:
@@ -358,6 +361,31 @@ def test_a_target_never_seen_whole_moves_with_its_fruit() -> None:
     assert [k for k, _ in b.moved] == [7]
 
 
+def test_a_target_in_the_harvest_phase_does_not_follow_its_cut_views() -> None:
+    # hold_cut_views_in_harvest: the tools in front of the fruit cut its views, and one they
+    # cut can still be of the fruit's own size. Held: such views neither join the median nor
+    # move the target; from the next approach on they do again.
+    b = FruitBook(same_fruit_m=0.08, replan_m=0.015, follow_cut_views=True)
+    p0, p1 = np.array((0.80, -0.20, 1.20)), np.array((0.80, -0.17, 1.20))
+
+    def view(p: np.ndarray) -> Fruit:
+        return fruit(7, tuple(p)).model_copy(update={"flags": ("edge_occluded",)})
+
+    for _ in range(MIN_RECENT_VIEWS):
+        b.update(scene(view(p0)), never)
+    r = b.records[7]
+    kept = len(r.cut_views)
+    b.held_key = 7
+    for _ in range(5):
+        b.update(scene(view(p1)), never)
+    assert np.allclose(r.planned.centre_world_m, p0)
+    assert len(r.cut_views) == kept
+    b.held_key = None
+    for _ in range(5):
+        b.update(scene(view(p1)), never)
+    assert np.allclose(r.planned.centre_world_m, p1)
+
+
 def test_follow_cut_views_off_keeps_the_rule_before_it() -> None:
     # The A/B setting: one view straying replan_m moves the target, and nothing nearer does.
     b = FruitBook(same_fruit_m=0.04, replan_m=0.015, follow_cut_views=False)
@@ -410,3 +438,20 @@ def test_a_whole_view_is_kept_while_the_fruit_shows_no_larger() -> None:
         b.update(scene(cut), never)
     r = b.records[5]
     assert r.planned_whole and np.allclose(r.planned.centre_world_m, p)
+
+
+def test_the_machine_holds_only_its_target_and_only_in_the_harvest_phase() -> None:
+    on = {"follow_cut_views": True, "hold_cut_views_in_harvest": True}
+    core = PlannerCore(load_settings(Settings, on))
+    for seq in range(MIN_SIGHTINGS):
+        core.book.update(scene(fruit(12, (0.88, 0.25, 1.31)), seq=seq), never)
+    ok = ReachVerdict(True, 0.0, 0.0, 0.0)
+    core.book.records[12].reach = (ok, ok)
+    book, m = core.book, core.machine
+    m._select(0)
+    assert m.phase == "approach" and book.held_key is None
+    m._enter("harvest", 1)
+    assert book.held_key == 12
+    for k, phase in enumerate(("cut", "harvest", "leave", "approach", "home")):
+        m._enter(phase, 2 + k)
+        assert (book.held_key == 12) == (phase == "harvest")
