@@ -92,15 +92,21 @@ def test_no_path_is_reported_and_the_pose_goals_are_used() -> None:
     assert plan.why.startswith("no planned path (") and plan.why.endswith("pose goals")
 
 
-def elbow_in_a_branch(core: PlannerCore, planner: ApproachPlanner) -> IkSolution:
-    """A branch sphere on the collector's elbow at the pre-pose's IK solution."""
+def elbow_in_a_branch(
+    core: PlannerCore, planner: ApproachPlanner, radius_m: float = 0.03, fruit: bool = False
+) -> IkSolution:
+    """A branch sphere (or a fruit) on the collector's elbow at the pre-pose's IK solution."""
     sol = pre_pose_solution(core)
     robot = planner.space.robot
     robot.set_q(sol.q_rad)
-    elbow = robot.data.oMi[robot.model.getJointId("collector_j4")].translation
-    planner.obstacles = Obstacles(
-        spheres=(SphereObstacle(name="occupied_1", center_world_m=tuple(elbow), radius_m=0.03),)
-    )
+    elbow = tuple(robot.data.oMi[robot.model.getJointId("collector_j4")].translation)
+    if fruit:
+        axes = (radius_m,) * 3
+        f = EllipsoidObstacle(name="fruit_7", fruit_id=7, center_world_m=elbow, semi_axes_m=axes)
+        planner.obstacles = Obstacles(ellipsoids=(f,))
+    else:
+        sphere = SphereObstacle(name="occupied_1", center_world_m=elbow, radius_m=radius_m)
+        planner.obstacles = Obstacles(spheres=(sphere,))
     return sol
 
 
@@ -111,7 +117,7 @@ def test_a_goal_with_an_elbow_in_a_branch_is_moved_clear_with_the_tools_held() -
     plain = ApproachPlanner(s.model_copy(update={"plan_max_checks": 300}))  # no IK: as it is
     sol = elbow_in_a_branch(core, plain)
     got = plain.plan(HOME, [sol], rec.planned, 1, pose)
-    assert got.path is None and "-30 mm (branch) at the end):" in got.why
+    assert got.path is None and "the goal is -30 mm (branch) inside" in got.why
 
     planner = ApproachPlanner(s, core.kin.solver)
     sol = elbow_in_a_branch(core, planner)
@@ -180,7 +186,7 @@ def test_the_approach_follows_the_path_then_sends_the_pose_goals() -> None:
 
 
 def test_without_the_setting_there_is_no_path() -> None:
-    core = core_with("nearest", fruit(1, A, 0.5))
+    core = core_with("nearest", fruit(1, A, 0.5), plan_approach="off")
     core.book.records[1].reach = None
     goals = run(core, 2.0)
     assert core.machine.motion is None
@@ -237,3 +243,23 @@ def test_after_a_stall_the_approach_gets_a_planned_path() -> None:
     assert why[0].startswith("approach no progress") and "planned joint path" in why[0]
     assert any(e.phase_to == "harvest" for e in m.events)
     assert not any(e.event == "fruit_skipped" for e in m.events)
+
+
+def test_no_path_to_a_goal_deep_in_a_branch_but_one_in_a_fruit_or_a_twig_is_planned_for() -> None:
+    """plan_goal_max_depth_m: the dampers stop the arms short of a goal inside a branch, in
+    contact (paper-exp1 seed 9: a path to a goal 53 mm inside one, then 12 contacts). A fruit
+    swings aside; a goal 1 cm inside a twig is within the branch check's own depth."""
+    core = planned_core()
+    s, rec = core.machine.s, core.book.records[1]
+    pose = pre_pose(rec.planned, core.machine.pose_settings)
+    plain = ApproachPlanner(s.model_copy(update={"plan_max_checks": 50}))  # goals as they are
+    deep = plain.plan(HOME, [elbow_in_a_branch(core, plain)], rec.planned, 1, pose)
+    assert deep.path is None
+    assert deep.why == "no planned path (the goal is -30 mm (branch) inside): pose goals"
+    assert plain.space.checks < 10  # refused before any search
+    for sol in (elbow_in_a_branch(core, plain, fruit=True), elbow_in_a_branch(core, plain, 0.01)):
+        got = plain.plan(HOME, [sol], rec.planned, 1, pose)
+        assert "the goal is" not in got.why and "at the end" in got.why, got.why
+    off = ApproachPlanner(s.model_copy(update={"plan_max_checks": 50, "plan_goal_max_depth_m": 1}))
+    got = off.plan(HOME, [elbow_in_a_branch(core, off)], rec.planned, 1, pose)
+    assert "-30 mm (branch) at the end" in got.why

@@ -37,9 +37,10 @@ def fruit(fid: int, p: tuple[float, float, float], distance_m: float) -> Fruit:
     )
 
 
-def core_with(order: str, *fruits: Fruit) -> PlannerCore:
-    """A planner core whose book holds ``fruits``, every pose reachable by the IK."""
-    core = PlannerCore(load_settings(Settings, {"order": order}))
+def core_with(order: str, *fruits: Fruit, **settings: object) -> PlannerCore:
+    """A planner core whose book holds ``fruits``, every pose reachable by the IK (``settings``:
+    other planner settings)."""
+    core = PlannerCore(load_settings(Settings, {"order": order, **settings}))
     for seq in range(MIN_SIGHTINGS):  # seen in a few scene states: fruit, not flashes
         core.book.update(
             SceneState(
