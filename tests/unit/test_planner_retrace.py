@@ -61,8 +61,9 @@ def test_a_single_point_path_has_nothing_to_retrace() -> None:
 
 def drive_to_a_stall(retrace: bool) -> tuple[PlannerCore, list[Goal], int]:
     """The cutter stays 5 cm off the pre-pose while the joints go from Q0 to Q1 (in the
-    second after the selection, at startup_s = 1 s) and stop."""
-    core = core_with("nearest", fruit(1, A, 0.5))
+    second after the selection, at startup_s = 1 s) and stop. No planned path after the stall
+    (plan_approach off): retracing alone."""
+    core = core_with("nearest", fruit(1, A, 0.5), plan_approach="off")
     core.machine.s = core.machine.s.model_copy(update={"retrace_after_stall": retrace})
     m, t = core.machine, 0
     m.note_joints(Q0)
