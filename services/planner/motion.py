@@ -82,7 +82,7 @@ class ApproachPlanner:
             s.plan_limit_margin_rad,
         )
         if c1.obstacles_m < -s.plan_goal_max_depth_m and c1.nearest != "fruit":
-            why = f"the goal is {c1.describe()} inside{moved}"
+            why = f"the goal is {-c1.obstacles_m * 1e3:.0f} mm inside a {c1.nearest}{moved}"
             return ApproachPlan(None, f"no planned path ({why}): pose goals")
         res: PlanResult = rrt_connect(
             start,

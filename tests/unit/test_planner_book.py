@@ -345,19 +345,28 @@ def test_a_target_never_seen_whole_follows_its_views_median_not_one_stray_view()
     assert np.linalg.norm(r.planned.centre_world_m - truth) < 0.003
 
 
+P0, P1 = np.array((0.80, -0.20, 1.20)), np.array((0.80, -0.17, 1.20))  # a fruit pushed 3 cm
+
+
+def cut_view(p: np.ndarray) -> Fruit:
+    """A view of fruit 7 at ``p`` with a side hidden by a leaf."""
+    return fruit(7, tuple(p)).model_copy(update={"flags": ("edge_occluded",)})
+
+
+def following_book() -> FruitBook:
+    """follow_cut_views on, fruit 7 seen at P0 in enough cut views to be followed."""
+    b = FruitBook(same_fruit_m=0.08, replan_m=0.015, follow_cut_views=True)
+    for _ in range(MIN_RECENT_VIEWS):
+        b.update(scene(cut_view(P0)), never)
+    return b
+
+
 def test_a_target_never_seen_whole_moves_with_its_fruit() -> None:
     # A fruit pushed 3 cm while a leaf hides a side: the target follows within a few views.
-    b = FruitBook(same_fruit_m=0.08, replan_m=0.015, follow_cut_views=True)
-    p0, p1 = np.array((0.80, -0.20, 1.20)), np.array((0.80, -0.17, 1.20))
-
-    def view(p: np.ndarray) -> Fruit:
-        return fruit(7, tuple(p)).model_copy(update={"flags": ("edge_occluded",)})
-
-    for _ in range(MIN_RECENT_VIEWS):
-        b.update(scene(view(p0)), never)
+    b = following_book()
     for _ in range(5):
-        b.update(scene(view(p1)), never)
-    assert np.allclose(b.records[7].planned.centre_world_m, p1)
+        b.update(scene(cut_view(P1)), never)
+    assert np.allclose(b.records[7].planned.centre_world_m, P1)
     assert [k for k, _ in b.moved] == [7]
 
 
@@ -365,25 +374,18 @@ def test_a_target_in_the_harvest_phase_does_not_follow_its_cut_views() -> None:
     # hold_cut_views_in_harvest: the tools in front of the fruit cut its views, and one they
     # cut can still be of the fruit's own size. Held: such views neither join the median nor
     # move the target; from the next approach on they do again.
-    b = FruitBook(same_fruit_m=0.08, replan_m=0.015, follow_cut_views=True)
-    p0, p1 = np.array((0.80, -0.20, 1.20)), np.array((0.80, -0.17, 1.20))
-
-    def view(p: np.ndarray) -> Fruit:
-        return fruit(7, tuple(p)).model_copy(update={"flags": ("edge_occluded",)})
-
-    for _ in range(MIN_RECENT_VIEWS):
-        b.update(scene(view(p0)), never)
+    b = following_book()
     r = b.records[7]
     kept = len(r.cut_views)
     b.held_key = 7
     for _ in range(5):
-        b.update(scene(view(p1)), never)
-    assert np.allclose(r.planned.centre_world_m, p0)
+        b.update(scene(cut_view(P1)), never)
+    assert np.allclose(r.planned.centre_world_m, P0)
     assert len(r.cut_views) == kept
     b.held_key = None
     for _ in range(5):
-        b.update(scene(view(p1)), never)
-    assert np.allclose(r.planned.centre_world_m, p1)
+        b.update(scene(cut_view(P1)), never)
+    assert np.allclose(r.planned.centre_world_m, P1)
 
 
 def test_follow_cut_views_off_keeps_the_rule_before_it() -> None:

@@ -117,7 +117,7 @@ def test_a_goal_with_an_elbow_in_a_branch_is_moved_clear_with_the_tools_held() -
     plain = ApproachPlanner(s.model_copy(update={"plan_max_checks": 300}))  # no IK: as it is
     sol = elbow_in_a_branch(core, plain)
     got = plain.plan(HOME, [sol], rec.planned, 1, pose)
-    assert got.path is None and "the goal is -30 mm (branch) inside" in got.why
+    assert got.path is None and "the goal is 30 mm inside a branch" in got.why
 
     planner = ApproachPlanner(s, core.kin.solver)
     sol = elbow_in_a_branch(core, planner)
@@ -255,7 +255,7 @@ def test_no_path_to_a_goal_deep_in_a_branch_but_one_in_a_fruit_or_a_twig_is_plan
     plain = ApproachPlanner(s.model_copy(update={"plan_max_checks": 50}))  # goals as they are
     deep = plain.plan(HOME, [elbow_in_a_branch(core, plain)], rec.planned, 1, pose)
     assert deep.path is None
-    assert deep.why == "no planned path (the goal is -30 mm (branch) inside): pose goals"
+    assert deep.why == "no planned path (the goal is 30 mm inside a branch): pose goals"
     assert plain.space.checks < 10  # refused before any search
     for sol in (elbow_in_a_branch(core, plain, fruit=True), elbow_in_a_branch(core, plain, 0.01)):
         got = plain.plan(HOME, [sol], rec.planned, 1, pose)
