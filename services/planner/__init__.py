@@ -190,7 +190,7 @@ class Settings(ServiceSettings):
         "usual pose goals. 'always': every approach starts along one (no path found: the pose "
         "goals at once); 'after_stall': an approach whose pose goals stop making progress "
         "gets one (once per attempt) before it is given up; 'off': pose goals only. Default "
-        "'after_stall': orchard seeds 0-19 gave 85 of 101 reachable against 83 (off), with 305 "
+        "'after_stall': orchard seeds 0-19 gave 85 of 101 reachable against 83 (off), with 311 "
         "collisions against 333 (BENCHMARKS.md, Harvest, session 20).",
     )
     plan_margin_m: float = Field(
