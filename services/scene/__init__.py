@@ -292,6 +292,15 @@ class Settings(ServiceSettings):
         description="No sphere comes within d_v plus this of the selected fruit's centre: the "
         "dish must get under it and the cutter to its peduncle, next to its own branch's tip, m.",
     )
+    occupancy_target_corridor_m: float = Field(
+        default=0.0,
+        ge=0,
+        le=1,
+        description="The keep-out reaches this far from the selected fruit's centre towards the "
+        "camera along its optical axis (the tools' approach line: the pre-pose is d_z in front), "
+        "as a capsule of the same radius: no sphere within d_v + occupancy_target_clearance_m of "
+        "that segment. 0: a sphere round the fruit only, m.",
+    )
 
 
 SPEC = NodeSpec(

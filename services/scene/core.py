@@ -418,15 +418,17 @@ class SceneCore:
 
     def _keep_out(
         self, selected: Entry | None
-    ) -> tuple[list[tuple[np.ndarray, float]], tuple[np.ndarray, float] | None]:
+    ) -> tuple[list[Capsule], tuple[np.ndarray, float] | None]:
         """Where no occupied sphere may be: around the selected fruit (its working space) and
         inside the trunk obstacle (already guarded by its cylinder)."""
-        spheres = []
+        spheres: list[Capsule] = []
         if selected is not None:
             st = selected.state
-            spheres.append(
-                (st.position_world_m, st.semi_axis_v_m + self.s.occupancy_target_clearance_m)
-            )
+            centre = st.position_world_m
+            # towards the camera along its optical axis: where the tools come from
+            assert self.T is not None  # an entry exists only after a frame was used
+            front = centre - self.T.R[:, 2] * self.s.occupancy_target_corridor_m
+            spheres.append((centre, front, st.semi_axis_v_m + self.s.occupancy_target_clearance_m))
         trunk = self.trunk.state
         cylinder = None
         if trunk is not None:

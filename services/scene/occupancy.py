@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from schemas.scene import SphereObstacle
-from services.robot.clearance import Capsule
+from services.robot.clearance import Capsule, axis_distances_m
 from services.scene.geometry import Pinhole, RigidTransform, vec3
 
 BLANK_WINDOW_PX = 3  # bark this near a voxel's pixel: the branch may still stand there
@@ -252,22 +252,22 @@ class OccupancyGrid:
 
     def obstacles(
         self,
-        keep_out: Sequence[tuple[np.ndarray, float]] = (),
+        keep_out: Sequence[Capsule] = (),
         inside_cylinder: tuple[np.ndarray, float] | None = None,
     ) -> tuple[SphereObstacle, ...]:
         """Spheres at the voxels' point means, the ``max_obstacles`` most recently hit (then by
-        voxel index: deterministic), without those whose surface comes within a keep-out sphere
-        ((centre, radius), m: the selected fruit's working space) or whose centre is inside the
-        vertical cylinder ``inside_cylinder`` ((axis point, radius), m: the trunk obstacle,
-        which already guards that space)."""
+        voxel index: deterministic), without those whose surface comes within a keep-out capsule
+        ((a, b, radius), m; a sphere where a == b: the selected fruit's working space) or whose
+        centre is inside the vertical cylinder ``inside_cylinder`` ((axis point, radius), m: the
+        trunk obstacle, which already guards that space)."""
         return self._spheres("occupied", False, keep_out, inside_cylinder)
 
     def within(
         self,
-        keep_out: Sequence[tuple[np.ndarray, float]],
+        keep_out: Sequence[Capsule],
         inside_cylinder: tuple[np.ndarray, float] | None = None,
     ) -> tuple[SphereObstacle, ...]:
-        """The spheres ``obstacles`` leaves out for the keep-out spheres (those inside the
+        """The spheres ``obstacles`` leaves out for the keep-out capsules (those inside the
         trunk cylinder stay out: the trunk guards them), the most recently hit first, at most
         ``max_obstacles``: every branch seen near the selected fruit, for checking tool poses."""
         return self._spheres("near", True, keep_out, inside_cylinder)
@@ -276,16 +276,18 @@ class OccupancyGrid:
         self,
         name: str,
         in_keep_out: bool,
-        keep_out: Sequence[tuple[np.ndarray, float]],
+        keep_out: Sequence[Capsule],
         inside_cylinder: tuple[np.ndarray, float] | None,
     ) -> tuple[SphereObstacle, ...]:
         """The voxels inside (``in_keep_out``) or outside the keep-out and outside the
         cylinder, as spheres ``<name>_<k>``, most recently hit first, at most max_obstacles."""
         r = self.p.sphere_radius_m
+        radii = np.array([kr for _a, _b, kr in keep_out])
         kept: list[tuple[int, tuple[int, int, int], np.ndarray]] = []
         for key, vox in self.voxels.items():
             c = vox.center_m
-            if any(float(np.linalg.norm(c - k)) < kr + r for k, kr in keep_out) != in_keep_out:
+            inside = bool(np.any(axis_distances_m(c, keep_out) < radii + r))
+            if inside != in_keep_out:
                 continue
             if inside_cylinder is not None:
                 axis, radius = inside_cylinder

@@ -71,7 +71,7 @@ def test_nothing_within_the_keep_out_sphere_and_the_cylinder() -> None:
     grid.step(bark_mask(sc), sc.depth, K, T, ())
     lo, hi = strip_world_box()
     mid = (lo + hi) / 2
-    kept = centres(grid, keep_out=[(mid, 0.05)])
+    kept = centres(grid, keep_out=[(mid, mid, 0.05)])
     assert len(kept) > 0 and len(kept) < len(centres(grid))
     assert np.all(np.linalg.norm(kept - mid, axis=1) >= 0.05 + P.sphere_radius_m)
     assert len(centres(grid, inside_cylinder=(mid, 0.5))) == 0
@@ -82,13 +82,26 @@ def test_the_keep_out_hands_its_spheres_over_to_within() -> None:
     grid = OccupancyGrid(P)
     grid.step(bark_mask(sc), sc.depth, K, T, ())
     lo, hi = strip_world_box()
-    keep_out = [((lo + hi) / 2, 0.05)]
+    keep_out = [((lo + hi) / 2, (lo + hi) / 2, 0.05)]
     out = {s.center_world_m for s in grid.obstacles(keep_out)}
     near = {s.center_world_m for s in grid.within(keep_out)}
     assert near and not (out & near)  # one or the other, never both
     assert out | near == {s.center_world_m for s in grid.obstacles()}  # together: all of it
     assert grid.within(keep_out, inside_cylinder=(keep_out[0][0], 0.5)) == ()  # trunk's own
     assert grid.within([]) == ()
+
+
+def test_a_keep_out_capsule_clears_its_whole_segment() -> None:
+    sc = branch_scene()
+    grid = OccupancyGrid(P)
+    grid.step(bark_mask(sc), sc.depth, K, T, ())
+    lo, hi = strip_world_box()
+    mid = (lo + hi) / 2
+    front = mid - R_WORLD_CAM[:, 2] * 0.3  # 0.3 m towards the camera
+    assert len(centres(grid, keep_out=[(front, front, 0.05)])) == len(centres(grid))
+    kept = centres(grid, keep_out=[(mid, front, 0.05)])
+    assert len(kept) == len(centres(grid, keep_out=[(mid, mid, 0.05)]))  # the strip's end: mid
+    assert len(kept) < len(centres(grid))
 
 
 def test_the_count_is_capped_to_the_most_recently_hit() -> None:
@@ -284,3 +297,20 @@ def test_the_selected_fruits_working_space_is_kept_free() -> None:
     assert np.all(np.linalg.norm(c - np.array(f.position_world_m), axis=1) >= reach - 1e-9)
     free = run_core(sc, {})  # no fruit selected: the strip is whole
     assert len(free.obstacles.spheres) > len(c)
+
+
+def test_the_corridor_keeps_the_approach_line_free_in_front_of_the_fruit() -> None:
+    # a fruit 0.78 m ahead and a bark strip 0.23 m in front of it, 0.1 m to its side: outside a
+    # 0.1 m keep-out sphere, inside the capsule along the optical axis towards the camera
+    centre_cam = np.array([0.12, 0.0, 0.78])
+    sc = Scene()
+    u, v = K.project(np.array([0.02, 0.0, 0.55]))
+    sc.plane_rect(0.55, int(u) - 6, int(u) + 6, int(v) - 30, int(v) + 30, colour=BARK)
+    sc.ellipsoid(tuple(centre_cam), 0.04, 0.045)
+    sphere = run_core(sc, {1: sc.box(1)}, occupancy_target_clearance_m=0.1)
+    corridor = run_core(
+        sc, {1: sc.box(1)}, occupancy_target_clearance_m=0.1, occupancy_target_corridor_m=0.3
+    )
+    assert len(sphere.obstacles.spheres) > 0 and sphere.spheres_near_selected == ()
+    assert corridor.obstacles.spheres == ()
+    assert len(corridor.spheres_near_selected) == len(sphere.obstacles.spheres)
