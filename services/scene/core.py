@@ -421,14 +421,14 @@ class SceneCore:
     ) -> tuple[list[Capsule], tuple[np.ndarray, float] | None]:
         """Where no occupied sphere may be: around the selected fruit (its working space) and
         inside the trunk obstacle (already guarded by its cylinder)."""
-        spheres: list[Capsule] = []
+        regions: list[Capsule] = []
         if selected is not None:
             st = selected.state
             centre = st.position_world_m
             # towards the camera along its optical axis: where the tools come from
             assert self.T is not None  # an entry exists only after a frame was used
             front = centre - self.T.R[:, 2] * self.s.occupancy_target_corridor_m
-            spheres.append((centre, front, st.semi_axis_v_m + self.s.occupancy_target_clearance_m))
+            regions.append((centre, front, st.semi_axis_v_m + self.s.occupancy_target_clearance_m))
         trunk = self.trunk.state
         cylinder = None
         if trunk is not None:
@@ -436,7 +436,7 @@ class SceneCore:
                 trunk, selected, self.s.trunk_default_radius_m, self.s.trunk_tool_margin_m
             )
             cylinder = (trunk.axis_world_m, r_obs)
-        return spheres, cylinder
+        return regions, cylinder
 
     def _to_cam(self, p_world: np.ndarray) -> np.ndarray:
         assert self.T is not None  # an entry or a trunk exists only after a frame was used

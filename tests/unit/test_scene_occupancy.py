@@ -65,12 +65,17 @@ def test_points_on_the_robot_are_left_out() -> None:
     assert np.all(c[:, 2] < mid[2] + 0.02)
 
 
-def test_nothing_within_the_keep_out_sphere_and_the_cylinder() -> None:
+def stepped_grid() -> tuple[OccupancyGrid, np.ndarray]:
+    """A grid that has seen the branch scene once, and the strip's middle (world, m)."""
     sc = branch_scene()
     grid = OccupancyGrid(P)
     grid.step(bark_mask(sc), sc.depth, K, T, ())
     lo, hi = strip_world_box()
-    mid = (lo + hi) / 2
+    return grid, (lo + hi) / 2
+
+
+def test_nothing_within_the_keep_out_sphere_and_the_cylinder() -> None:
+    grid, mid = stepped_grid()
     kept = centres(grid, keep_out=[(mid, mid, 0.05)])
     assert len(kept) > 0 and len(kept) < len(centres(grid))
     assert np.all(np.linalg.norm(kept - mid, axis=1) >= 0.05 + P.sphere_radius_m)
@@ -78,11 +83,8 @@ def test_nothing_within_the_keep_out_sphere_and_the_cylinder() -> None:
 
 
 def test_the_keep_out_hands_its_spheres_over_to_within() -> None:
-    sc = branch_scene()
-    grid = OccupancyGrid(P)
-    grid.step(bark_mask(sc), sc.depth, K, T, ())
-    lo, hi = strip_world_box()
-    keep_out = [((lo + hi) / 2, (lo + hi) / 2, 0.05)]
+    grid, mid = stepped_grid()
+    keep_out = [(mid, mid, 0.05)]
     out = {s.center_world_m for s in grid.obstacles(keep_out)}
     near = {s.center_world_m for s in grid.within(keep_out)}
     assert near and not (out & near)  # one or the other, never both
@@ -92,11 +94,7 @@ def test_the_keep_out_hands_its_spheres_over_to_within() -> None:
 
 
 def test_a_keep_out_capsule_clears_its_whole_segment() -> None:
-    sc = branch_scene()
-    grid = OccupancyGrid(P)
-    grid.step(bark_mask(sc), sc.depth, K, T, ())
-    lo, hi = strip_world_box()
-    mid = (lo + hi) / 2
+    grid, mid = stepped_grid()
     front = mid - R_WORLD_CAM[:, 2] * 0.3  # 0.3 m towards the camera
     assert len(centres(grid, keep_out=[(front, front, 0.05)])) == len(centres(grid))
     kept = centres(grid, keep_out=[(mid, front, 0.05)])
