@@ -3,12 +3,13 @@ obstacle set (paper §III-A to §III-C, §IV-B); answers every perception/tracks
 
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, model_validator
 from pydantic_settings import SettingsConfigDict
 
 from services.runtime import NodeSpec, ServiceDef, ServiceSettings
 
 HsvTriple = tuple[int, int, int]
+NEAR_RADIUS_MIN_M = 0.002  # the controller refuses spheres under 1 mm
 
 
 class Settings(ServiceSettings):
@@ -301,6 +302,35 @@ class Settings(ServiceSettings):
         "as a capsule of the same radius: no sphere within d_v + occupancy_target_clearance_m of "
         "that segment. 0: a sphere round the fruit only, m.",
     )
+    occupancy_near_radius_m: float = Field(
+        default=0.0,
+        ge=0,
+        le=0.1,
+        description="0: the spheres inside the keep-out are left out of the obstacles. Above 0 "
+        "(at least 2 mm): those outside the inner working space are passed on at this radius "
+        "(the points' mean, not inflated to the voxel), so the dampers hold the arms off the "
+        "branches seen near the target by their own distance only, m.",
+    )
+    occupancy_inner_clearance_m: float = Field(
+        default=0.05,
+        ge=0,
+        le=1,
+        description="With occupancy_near_radius_m: no sphere at all within d_v plus this of the "
+        "selected fruit's centre, nor of the segment up from it to d_v plus "
+        "occupancy_inner_twig_m above it (the fruit's own twig, where the cutter closes), m.",
+    )
+    occupancy_inner_twig_m: float = Field(
+        default=0.10, ge=0, le=0.5, description="See occupancy_inner_clearance_m, m."
+    )
+
+    @model_validator(mode="after")
+    def _near_radius(self) -> "Settings":
+        if 0 < self.occupancy_near_radius_m < NEAR_RADIUS_MIN_M:
+            raise ValueError(
+                f"occupancy_near_radius_m {self.occupancy_near_radius_m} is below "
+                f"{NEAR_RADIUS_MIN_M} m (the controller refuses smaller spheres); 0 turns it off"
+            )
+        return self
 
 
 SPEC = NodeSpec(

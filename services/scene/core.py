@@ -402,10 +402,9 @@ class SceneCore:
         near: tuple[SphereObstacle, ...] = ()
         if self.occupancy is not None:
             keep_out = self._keep_out(selected)
-            obstacles = obstacles.model_copy(
-                update={"spheres": self.occupancy.obstacles(*keep_out)}
-            )
             near = self.occupancy.within(*keep_out)
+            spheres = self.occupancy.obstacles(*keep_out) + self._near_shown(selected, near)
+            obstacles = obstacles.model_copy(update={"spheres": spheres})
         return SceneState(
             header=self.stamper.answer(TOPIC_OUT, tracks.header, frame_id="world"),
             fruits=fruits,
@@ -437,6 +436,24 @@ class SceneCore:
             )
             cylinder = (trunk.axis_world_m, r_obs)
         return regions, cylinder
+
+    def _near_shown(
+        self, selected: Entry | None, near: tuple[SphereObstacle, ...]
+    ) -> tuple[SphereObstacle, ...]:
+        """The keep-out's spheres that the controller still sees (``occupancy_near_radius_m``
+        above 0): those outside the inner working space (round the fruit and up its twig), at
+        that radius. The branch check keeps ``near`` whole, at full radius."""
+        r = self.s.occupancy_near_radius_m
+        if r <= 0 or selected is None or self.occupancy is None:
+            return ()
+        st = selected.state
+        centre = st.position_world_m
+        top = centre + np.array([0.0, 0.0, st.semi_axis_v_m + self.s.occupancy_inner_twig_m])
+        inner = [(centre, top, st.semi_axis_v_m + self.s.occupancy_inner_clearance_m)]
+        inside = {sp.center_world_m for sp in self.occupancy.within(inner)}
+        return tuple(
+            sp.model_copy(update={"radius_m": r}) for sp in near if sp.center_world_m not in inside
+        )
 
     def _to_cam(self, p_world: np.ndarray) -> np.ndarray:
         assert self.T is not None  # an entry or a trunk exists only after a frame was used

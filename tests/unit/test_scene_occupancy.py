@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from services.robot.clearance import axis_distances_m
 from services.runtime.settings import load_settings
 from services.scene import Settings
 from services.scene.core import SceneCore
@@ -312,3 +313,31 @@ def test_the_corridor_keeps_the_approach_line_free_in_front_of_the_fruit() -> No
     assert len(sphere.obstacles.spheres) > 0 and sphere.spheres_near_selected == ()
     assert corridor.obstacles.spheres == ()
     assert len(corridor.spheres_near_selected) == len(sphere.obstacles.spheres)
+
+
+def test_near_spheres_reach_the_controller_small_outside_the_inner_working_space() -> None:
+    sc = branch_scene()
+    sc.ellipsoid((0.12, 0.0, 0.78), 0.04, 0.045)  # beside the strip, as above
+    boxes = {1: sc.box(1)}
+    r = Settings().occupancy_target_clearance_m
+    off = run_core(sc, boxes)
+    on = run_core(sc, boxes, occupancy_near_radius_m=0.01)
+    no_twig = run_core(sc, boxes, occupancy_near_radius_m=0.01, occupancy_inner_twig_m=0.0)
+    assert all(s.radius_m == 0.03 for s in off.obstacles.spheres) and r > 0
+    assert on.spheres_near_selected == off.spheres_near_selected  # the branch check's: whole
+    small = [s for s in on.obstacles.spheres if s.radius_m == 0.01]
+    assert [s for s in on.obstacles.spheres if s.radius_m != 0.01] == list(off.obstacles.spheres)
+    assert 0 < len(small) < len(off.spheres_near_selected)
+    (f,) = on.fruits
+    centre = np.array(f.position_world_m)
+    top = centre + np.array([0.0, 0.0, f.semi_axis_v_m + 0.1])
+    reach = f.semi_axis_v_m + 0.05 + 0.03  # the inner clearance + the voxel's sphere radius
+    d = [axis_distances_m(np.array(s.center_world_m), [(centre, top, 0.0)])[0] for s in small]
+    assert min(d) >= reach - 1e-9
+    # the fruit's own twig: the strip above it is left out with the twig, shown without it
+    assert len([s for s in no_twig.obstacles.spheres if s.radius_m == 0.01]) > len(small)
+
+
+def test_a_near_radius_under_two_millimetres_is_refused_by_name() -> None:
+    with pytest.raises(ValueError, match=r"occupancy_near_radius_m 0\.001"):
+        load_settings(Settings, {"occupancy_near_radius_m": 0.001})
