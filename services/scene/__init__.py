@@ -303,7 +303,7 @@ class Settings(ServiceSettings):
         "that segment. 0: a sphere round the fruit only, m.",
     )
     occupancy_near_radius_m: float = Field(
-        default=0.0,
+        default=0.01,
         ge=0,
         le=0.1,
         description="0: the spheres inside the keep-out are left out of the obstacles. Above 0 "
