@@ -444,15 +444,19 @@ class SceneCore:
         above 0): those outside the inner working space (round the fruit and up its twig), at
         that radius. The branch check keeps ``near`` whole, at full radius."""
         r = self.s.occupancy_near_radius_m
-        if r <= 0 or selected is None or self.occupancy is None:
+        if r <= 0 or selected is None:
             return ()
         st = selected.state
         centre = st.position_world_m
         top = centre + np.array([0.0, 0.0, st.semi_axis_v_m + self.s.occupancy_inner_twig_m])
-        inner = [(centre, top, st.semi_axis_v_m + self.s.occupancy_inner_clearance_m)]
-        inside = {sp.center_world_m for sp in self.occupancy.within(inner)}
+        inner_m = st.semi_axis_v_m + self.s.occupancy_inner_clearance_m
+        # the occupancy grid's own keep-out test (a sphere's surface within the capsule), on
+        # the spheres already found near rather than a second pass over the whole grid
         return tuple(
-            sp.model_copy(update={"radius_m": r}) for sp in near if sp.center_world_m not in inside
+            sp.model_copy(update={"radius_m": r})
+            for sp in near
+            if axis_distances_m(np.array(sp.center_world_m), [(centre, top, inner_m)])[0]
+            >= inner_m + sp.radius_m
         )
 
     def _to_cam(self, p_world: np.ndarray) -> np.ndarray:

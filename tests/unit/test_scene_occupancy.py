@@ -321,11 +321,11 @@ def test_near_spheres_reach_the_controller_small_outside_the_inner_working_space
     sc = branch_scene()
     sc.ellipsoid((0.12, 0.0, 0.78), 0.04, 0.045)  # beside the strip, as above
     boxes = {1: sc.box(1)}
-    r = Settings().occupancy_target_clearance_m
+    full_m = Settings().occupancy_sphere_radius_m
     off = run_core(sc, boxes)
     on = run_core(sc, boxes, occupancy_near_radius_m=0.01)
     no_twig = run_core(sc, boxes, occupancy_near_radius_m=0.01, occupancy_inner_twig_m=0.0)
-    assert all(s.radius_m == 0.03 for s in off.obstacles.spheres) and r > 0
+    assert all(s.radius_m == full_m for s in off.obstacles.spheres)
     assert on.spheres_near_selected == off.spheres_near_selected  # the branch check's: whole
     small = [s for s in on.obstacles.spheres if s.radius_m == 0.01]
     assert [s for s in on.obstacles.spheres if s.radius_m != 0.01] == list(off.obstacles.spheres)
@@ -333,7 +333,7 @@ def test_near_spheres_reach_the_controller_small_outside_the_inner_working_space
     (f,) = on.fruits
     centre = np.array(f.position_world_m)
     top = centre + np.array([0.0, 0.0, f.semi_axis_v_m + 0.1])
-    reach = f.semi_axis_v_m + 0.05 + 0.03  # the inner clearance + the voxel's sphere radius
+    reach = f.semi_axis_v_m + 0.05 + full_m  # the inner clearance + the voxel's sphere radius
     d = [axis_distances_m(np.array(s.center_world_m), [(centre, top, 0.0)])[0] for s in small]
     assert min(d) >= reach - 1e-9
     # the fruit's own twig: the strip above it is left out with the twig, shown without it
