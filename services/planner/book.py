@@ -369,8 +369,15 @@ class FruitBook:
 
     def detected(self) -> list[FruitRecord]:
         """Every physical fruit seen on the tree (fruit seen only in the basket, and flashes
-        seen in fewer than ``MIN_SIGHTINGS`` scene states, left out)."""
-        return [r for _, r in sorted(self.records.items()) if not r.in_basket and r.confirmed]
+        seen in fewer than ``MIN_SIGHTINGS`` scene states, left out). A fruit the tools went
+        for was on the tree (candidates are never in the basket), also when it was seen in
+        our dish later: the dish comes up under the target (paper-exp1 seed 0: seen "in the
+        dish" during the harvest, then harvested, and missing from the summary)."""
+        return [
+            r
+            for _, r in sorted(self.records.items())
+            if r.confirmed and (not r.in_basket or r.started_ns is not None)
+        ]
 
 
 def _shrunk(f: Fruit, size_m: tuple[float, float], share: float) -> bool:

@@ -230,6 +230,20 @@ def test_the_id_of_a_fruit_seen_in_the_basket_seen_on_a_fruit_on_the_tree_is_a_n
     assert b.records[15].in_basket and b.records[15].ids == []
 
 
+def test_a_target_seen_in_our_dish_and_harvested_is_a_detected_fruit() -> None:
+    # paper-exp1 seed 0: the dish came up under the target in the harvest and the scene saw it
+    # "in the dish"; it was harvested, and the run summary said 3 harvested of 4.
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    tree = (0.57, -0.14, 1.30)
+    for _ in range(MIN_SIGHTINGS):
+        b.update(scene(fruit(1, tree), fruit(2, (0.6, 0.1, 1.3))), never)
+    b.records[1].started_ns = 6 * 10**9  # selected: the tools go for it
+    b.update(scene(fruit(1, tree), fruit(2, (0.6, 0.1, 1.3))), lambda f, resting=False: True)
+    assert b.records[1].in_basket and b.records[2].in_basket  # the dish "under" both
+    b.records[1].outcome = "harvested"
+    assert [r.key for r in b.detected()] == [1]  # 2, never gone for: in the basket, not listed
+
+
 def test_a_harvested_fruit_seen_in_the_dish_or_a_dropped_one_seen_fallen_is_not_new() -> None:
     b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
     b.update(scene(fruit(2, (0.6, 0.0, 1.3)), fruit(3, (0.7, 0.1, 1.3))), never)
