@@ -174,7 +174,8 @@ def run_harvest(
 ) -> LoopRun:
     """Sim, truth scene, controller and planner in lock-step in one process until the planner
     is done (or ``max_s`` of sim time). ``transform(topic, msg)`` may alter a message on its
-    way (fault injection: e.g. a plan target the controller receives)."""
+    way to the controller or the planner (fault injection: e.g. a plan target the controller
+    receives, the basket count the planner receives)."""
     from services.controller import Settings as ControllerSettings
     from services.controller.core import ControllerCore
     from services.planner import Settings as PlannerSettings
@@ -214,7 +215,7 @@ def run_harvest(
             InprocNode(
                 "planner",
                 ("control/status", "scene/state", "robot/basket", "robot/joint_state"),
-                plan,
+                _Filter(plan),
             ),
         ],
         tap,

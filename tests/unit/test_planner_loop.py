@@ -209,6 +209,28 @@ def test_a_fruit_that_falls_beside_the_basket_is_reported_dropped(tmp_path: Path
     assert (s.dropped, s.harvested) == (1, 0)
 
 
+def test_a_fruit_counted_after_the_wait_is_harvested_not_dropped(tmp_path: Path) -> None:
+    # Fault injection: a slow load cell. The count reaches the planner 2 s after the fruit
+    # settles, past collect_timeout_s (1.5 s): the tools are already backing out to verify.
+    late_ns = 2_000_000_000
+    counted: dict[int, int] = {}  # count → sim stamp it first showed
+
+    def slow_load_cell(topic: str, msg: Any) -> Any:
+        if topic != "robot/basket":
+            return msg
+        counted.setdefault(msg.fruit_count, msg.header.stamp_ns)
+        shown = max(n for n, t in counted.items() if msg.header.stamp_ns - t >= late_ns or n == 0)
+        return msg.model_copy(update={"fruit_count": shown})
+
+    r = run_harvest(lab_scenario(tmp_path, [A]), transform=slow_load_cell, max_s=25)
+    assert r.sim_events("collected") and not r.sim_events("dropped")
+    (got,) = r.events("fruit_collected")
+    assert got.fruit_id == 1 and "while verifying" in got.reason
+    assert not r.events("fruit_dropped")
+    s = r.summary()
+    assert (s.harvested, s.dropped) == (1, 0)
+
+
 def test_two_runs_give_byte_identical_payloads_on_every_topic(tmp_path: Path) -> None:
     sc = lab_scenario(tmp_path, [A])
 
