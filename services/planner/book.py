@@ -103,6 +103,7 @@ class FruitRecord:
     in_scene: bool = True
     in_basket: bool = False
     outcome: FruitOutcome | None = None  # None: still to do
+    outcome_id: int | None = None  # the track ID its outcome was reported under (the events')
     reason: str = ""
     started_ns: int | None = None  # first selection
     finished_ns: int | None = None  # end of the cycle that settled it

@@ -55,6 +55,7 @@ def _record(r: FruitRecord) -> dict[str, Any]:
         "planned_whole": r.planned_whole,
         "in_basket": r.in_basket,
         "outcome": r.outcome,
+        "outcome_id": r.outcome_id,
         "reason": r.reason,
         "started_ns": r.started_ns,
         "finished_ns": r.finished_ns,
@@ -79,6 +80,7 @@ def _unrecord(d: dict[str, Any]) -> FruitRecord:
         in_scene=False,  # until the next scene state says otherwise
         in_basket=d["in_basket"],
         outcome=d["outcome"],
+        outcome_id=d.get("outcome_id"),
         reason=d["reason"],
         started_ns=d["started_ns"],
         finished_ns=d["finished_ns"],

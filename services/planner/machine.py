@@ -784,6 +784,7 @@ class Machine:
         """Record the outcome; the attempt ends with ``_end_attempt`` (at once, or once the
         tools are back at the pre-pose)."""
         rec.outcome, rec.reason = outcome, reason
+        rec.outcome_id = rec.fruit_id  # the ID the outcome's event names
 
     def _end_attempt(self, rec: FruitRecord, now: int) -> None:
         """The tools are done with this fruit for now: its time adds up; a settled fruit's

@@ -78,7 +78,9 @@ def run_summary(
         duration = f.spent_ns * 1e-9 if f.started_ns is not None else None
         results.append(
             FruitResult(
-                fruit_id=rec.fruit_id,
+                # The ID its outcome's event named: the record may carry a later one (a
+                # harvested fruit's track moved on; orchard runs listed one ID twice).
+                fruit_id=rec.outcome_id if rec.outcome_id is not None else rec.fruit_id,
                 outcome=rec.outcome or "pending",
                 reason=rec.reason,
                 started_ns=f.started_ns,

@@ -23,6 +23,7 @@ def book_with_two() -> FruitBook:
         b.update(scene(fruit(9, (0.61, 0.0, 1.3)), fruit(4, (0.7, 0.05, 1.25))), never)
     r = b.records[3]
     r.outcome, r.started_ns, r.finished_ns, r.spent_ns, r.cuts = "harvested", 10, 20, 10, 1
+    r.outcome_id = 3  # harvested as 3, before its track moved on to 9
     b.records[4].losses, b.records[4].deferred = 1, True
     return b
 
@@ -36,7 +37,7 @@ def test_a_journal_gives_back_every_record_and_the_pending_cut(tmp_path: Path) -
     assert jr.load(path, fresh) == (2, cut)
     assert sorted(fresh.records) == [3, 4] and fresh.id_to_key == {3: 3, 9: 3, 4: 4}
     got, was = fresh.records[3], b.records[3]
-    assert (got.fruit_id, got.ids, got.outcome) == (9, [3, 9], "harvested")
+    assert (got.fruit_id, got.ids, got.outcome, got.outcome_id) == (9, [3, 9], "harvested", 3)
     assert (got.cuts, got.spent_ns, got.started_ns, got.finished_ns) == (1, 10, 10, 20)
     assert np.allclose(got.planned.centre_world_m, was.planned.centre_world_m)
     assert got.seen == was.seen and not got.in_scene  # until a scene lists it again

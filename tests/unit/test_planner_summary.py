@@ -80,3 +80,22 @@ def test_a_forgotten_second_track_of_a_listed_fruit_is_not_another_fruit() -> No
     )
     far_gone = record(3, (0.6, 0.2, 1.3), outcome="lost")
     assert [f.rec.key for f in physical_fruit([done, gone, far_gone])] == [1, 3]
+
+
+def test_a_fruit_is_listed_under_the_id_its_outcome_was_reported_under() -> None:
+    # orchard seed 11 (old default): the summary listed fruit 13 harvested twice; the second
+    # was harvested as 72, whose record took ID 13 when the tracker moved that track on.
+    from schemas.base import Header
+    from services.planner.summary import run_summary
+    from tests.unit.test_planner_select import core_with
+    from tests.unit.test_planner_select import fruit as seen_fruit
+
+    core = core_with(
+        "nearest", seen_fruit(13, (0.6, 0.0, 1.3), 0.5), seen_fruit(72, (0.6, 0.2, 1.3), 0.6)
+    )
+    m, recs = core.machine, core.book.records
+    for key in (13, 72):
+        m._finish(recs[key], key * S, "harvested", "")
+    recs[72].fruit_id = 13  # a later ID (not a step of the machine; as the book may set)
+    summary = run_summary(Header(stamp_ns=S, seq=0, source="planner"), core.s, core.book, 0, S)
+    assert sorted(f.fruit_id for f in summary.fruits) == [13, 72]
