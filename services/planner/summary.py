@@ -78,8 +78,8 @@ def run_summary(
         duration = f.spent_ns * 1e-9 if f.started_ns is not None else None
         results.append(
             FruitResult(
-                # The ID its outcome's event named: the record may carry a later one (a
-                # harvested fruit's track moved on; orchard runs listed one ID twice).
+                # The ID its outcome's event named: the record may carry another by now
+                # (orchard seed 10: the events named 3 and 16, the summary said 7 and 124).
                 fruit_id=rec.outcome_id if rec.outcome_id is not None else rec.fruit_id,
                 outcome=rec.outcome or "pending",
                 reason=rec.reason,
