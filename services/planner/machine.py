@@ -83,6 +83,10 @@ class CutState:
     basket_before: int
     centre_world_m: np.ndarray
 
+    def counted(self, basket: int | None) -> bool:
+        """The basket's fruit count (None: no reading yet) is up since this cut."""
+        return basket is not None and basket > self.basket_before
+
 
 @dataclass
 class Progress:
@@ -350,7 +354,7 @@ class Machine:
     def _cut(self, now: int, st: ControlStatus, basket: int | None) -> None:
         rec, cut = self.target, self.cut
         assert rec is not None and cut is not None
-        if basket is not None and basket > cut.basket_before:
+        if cut.counted(basket):
             self.events.append(
                 Event(
                     "fruit_collected", rec.fruit_id, outcome="harvested", reason="basket count up"
@@ -395,7 +399,7 @@ class Machine:
 
     def _leave(self, now: int, st: ControlStatus, basket: int | None) -> None:
         if self.verify is not None:
-            if basket is not None and basket > self.verify.basket_before:
+            if self.verify.counted(basket):
                 self._collected_late(now)
                 return
             self._verify(now, st)
@@ -405,11 +409,7 @@ class Machine:
             return
         reached = self._reached(st, self.s.leave_tolerance_m, loose=True)
         if reached or now - self.progress.since_ns > self.s.leave_timeout_s * NS:
-            rec = self.target
-            if rec is not None:
-                self._end_attempt(rec, now)
-            self.target = None
-            self._select(now)
+            self._next_fruit(now)
 
     def _retracing(self, now: int) -> None:
         """Back along the attempt's joint path; at its start (or stuck, or timed out) the
@@ -424,9 +424,16 @@ class Machine:
         else:
             what = how if how == "stuck" else f"{how} after {self.s.retrace_timeout_s:.0f} s"
             self.left_because = f"retrace {what}, {short:.2f} rad short of where the attempt began"
+        self._next_fruit(now)
+
+    def _next_fruit(self, now: int) -> None:
+        """The tools are done with the target for now: its attempt ends (and the check of its
+        cut, if one was under way), and the next fruit is selected."""
         rec = self.target
         if rec is not None:
             self._end_attempt(rec, now)
+        self.verify = None
+        self.relook = False
         self.target = None
         self._select(now)
 
@@ -467,26 +474,19 @@ class Machine:
             why += "on its branch since"
             self.events.append(Event("fruit_dropped", rec.fruit_id, outcome="dropped", reason=why))
             self._finish(rec, now, "dropped", why)
-            self._end_attempt(rec, now)
-            self.verify = None
-            self.target = None
-            self._select(now)
+            self._next_fruit(now)
 
     def _collected_late(self, now: int) -> None:
         """The basket's count went up while an unconfirmed cut was being verified: the fruit
-        settled in the dish after ``collect_timeout_s`` (orchard seed 8, old default: it
-        rolled round the dish for 1.6 s, and the run reported it dropped)."""
+        settled in the dish after ``collect_timeout_s`` (orchard seed 8, session 22's old
+        default: in the basket at 67.9 s, reported dropped at 71.2 s)."""
         rec, cut = self.target, self.verify
         assert rec is not None and cut is not None
         late_s = (now - cut.stamp_ns) / NS
         why = f"basket count up {late_s:.1f} s after the cut, while verifying it"
         self.events.append(Event("fruit_collected", rec.fruit_id, outcome="harvested", reason=why))
         self._finish(rec, now, "harvested", "")
-        self._end_attempt(rec, now)
-        self.verify = None
-        self.relook = False
-        self.target = None
-        self._select(now)
+        self._next_fruit(now)
 
     def _relook_wanted(self, rec: FruitRecord) -> bool:
         return self.s.relook_before_retry and rec.cuts < self.s.max_cut_attempts
