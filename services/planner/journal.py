@@ -80,7 +80,7 @@ def _unrecord(d: dict[str, Any]) -> FruitRecord:
         in_scene=False,  # until the next scene state says otherwise
         in_basket=d["in_basket"],
         outcome=d["outcome"],
-        outcome_id=d.get("outcome_id"),
+        outcome_id=_track_id_or_none(d.get("outcome_id")),
         reason=d["reason"],
         started_ns=d["started_ns"],
         finished_ns=d["finished_ns"],
@@ -93,6 +93,13 @@ def _unrecord(d: dict[str, Any]) -> FruitRecord:
         last_seen_ns=d.get("last_seen_ns"),
         sightings=d.get("sightings", MIN_SIGHTINGS),  # older journals: records were fruit
     )
+
+
+def _track_id_or_none(v: Any) -> int | None:
+    """A record's ``outcome_id``: a track ID (an int ≥ 1) or None (older journals have none)."""
+    if v is None or (type(v) is int and v >= 1):
+        return v
+    raise ValueError(f"outcome_id {v!r} is not a track ID")
 
 
 def dump(book: FruitBook, contacts: int, cut: dict[str, int] | None) -> str:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -55,6 +56,18 @@ def test_an_unreadable_journal_starts_afresh(tmp_path: Path, text: str) -> None:
     b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
     assert jr.load(path, b) is None and b.records == {}
     assert jr.load(tmp_path / "none.json", b) is None
+
+
+def test_a_journal_with_a_bad_outcome_id_starts_afresh(tmp_path: Path) -> None:
+    data = json.loads(jr.dump(book_with_two(), 2, None))
+    data["records"][0]["outcome_id"] = "3"
+    path = tmp_path / "planner.json"
+    path.write_text(json.dumps(data))
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    assert jr.load(path, b) is None and b.records == {}
+    del data["records"][0]["outcome_id"]  # a journal from before the field: loads, None
+    path.write_text(json.dumps(data))
+    assert jr.load(path, b) is not None and b.records[3].outcome_id is None
 
 
 def test_a_restarted_core_resumes_without_a_second_run_start(tmp_path: Path) -> None:
