@@ -18,7 +18,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     tsub.required = True
     d = tsub.add_parser(
         "detector",
-        help="train OrangeNet from scratch (seeded, resumable, GPU when present)",
+        help="train OrangeNet from scratch or fine-tune it (seeded, resumable, GPU when present)",
         description="Train the orange detector on synthetic renders and the real photos; select "
         "on the validation sets; write the weights. Defaults reproduce the committed weights.",
     )
@@ -76,6 +76,13 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         "recipe's draws; N > 0: each batch seeded by (seed, epoch, batch), the same for any N; "
         "a GPU needs many)",
     )
+    d.add_argument(
+        "--init",
+        type=Path,
+        metavar="WEIGHTS",
+        help="fine-tune: start from these weights (e.g. the committed ones, on your own "
+        "photos) instead of a random initialisation; their architecture is kept",
+    )
     d.add_argument("--resume", action="store_true", help="continue from OUT_DIR/last.pt")
     d.set_defaults(func=cmd_train_detector)
 
@@ -84,6 +91,7 @@ def cmd_train_detector(args: argparse.Namespace) -> int:
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
     from services.detector.data import DatasetError
+    from services.detector.infer import WeightsError
     from services.detector.paths import DEFAULT_WEIGHTS, real_data_dir
     from services.detector.train import TrainConfig, finalize, parse_spec, pick_device, train
 
@@ -104,6 +112,7 @@ def cmd_train_detector(args: argparse.Namespace) -> int:
         threads=args.threads,
         workers=args.workers,
         synth_cache=str(args.synth_cache),
+        init_weights=str(args.init) if args.init else None,
     )
     print(f"training on {pick_device()}; checkpoints in {cfg.out_dir}", file=sys.stderr)
     try:
@@ -122,7 +131,7 @@ def cmd_train_detector(args: argparse.Namespace) -> int:
             )
         command = "harvest " + shlex.join(sys.argv[1:])
         meta = finalize(cfg, summary, command)
-    except DatasetError as exc:
+    except (DatasetError, WeightsError) as exc:
         print(f"harvest train detector: {exc}", file=sys.stderr)
         return 1
     print(json.dumps(meta, indent=2))

@@ -26,7 +26,7 @@ from services.detector.augment import mosaic, photometric, random_placement
 from services.detector.data import DatasetError, Sample, load_dataset
 from services.detector.ema import WeightAverage
 from services.detector.evaluate import evaluate
-from services.detector.infer import OrangeDetector, save_weights
+from services.detector.infer import OrangeDetector, load_weights, save_weights
 from services.detector.net import NetConfig, OrangeNet
 from services.detector.targets import focal_loss, giou_loss, make_targets
 
@@ -124,6 +124,9 @@ class TrainConfig:
     # generator per epoch (the committed recipe). N > 0: a DataLoader of N workers, each batch
     # from its own generator (seed, epoch, batch): the same batches for any N (a GPU needs many).
     workers: int = 0
+    # Fine-tuning: start from these weights (their architecture config replaces ``net``)
+    # instead of a random initialisation. None: from scratch (the committed recipe).
+    init_weights: str | None = None
     net: dict[str, Any] = field(default_factory=lambda: NetConfig().to_dict())
 
 
@@ -284,8 +287,15 @@ def train(
     if device.type == "cpu":
         torch.set_num_threads(cfg.threads)
     torch.manual_seed(cfg.seed)
+    start = load_weights(Path(cfg.init_weights)) if cfg.init_weights else None
+    if start is not None:
+        cfg.net = start.net.cfg.to_dict()
+        log(f"fine-tuning from {cfg.init_weights} ({start.version})")
     ncfg = NetConfig.from_dict(cfg.net)
-    net = OrangeNet(ncfg).to(device)
+    net = OrangeNet(ncfg)
+    if start is not None:
+        net.load_state_dict(start.net.state_dict())
+    net = net.to(device)
     opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     ema = WeightAverage(net, cfg.ema_decay) if cfg.ema_decay > 0 else None
     # What is validated, selected and saved (the average is a copy of the net: an OrangeNet).
@@ -387,8 +397,6 @@ def choose_threshold(net: OrangeNet, specs: list[DataSpec], device: torch.device
 def finalize(cfg: TrainConfig, summary: dict[str, Any], command: str) -> dict[str, Any]:
     """Write the best checkpoint as the service's weights with its operating threshold."""
     import hashlib
-
-    from services.detector.infer import load_weights
 
     device = pick_device()
     cfg.val = resolve(cfg.val, Path(cfg.out_dir), Path(cfg.synth_cache))

@@ -259,3 +259,36 @@ def test_parallel_batches_are_the_same_for_any_worker_count_and_resume_point(
     assert [h["epoch"] for h in summary["history"]] == [0, 1]
     assert (tmp_path / "w2" / "last.pt").exists()
     assert not (tmp_path / "w2" / "last.pt.part").exists()
+
+
+def test_fine_tuning_starts_from_the_given_weights_and_keeps_their_architecture(
+    tmp_path: Path,
+) -> None:
+    from services.detector.train import DataSpec, TrainConfig, train
+
+    train_set = write_dataset(tmp_path, 4, 10)
+    torch.manual_seed(7)
+    start = OrangeNet(SMALL)
+    save_weights(tmp_path / "start.pt", start, {"version": "v1-start"})
+    cfg = TrainConfig(
+        train=[DataSpec(str(train_set))],
+        val=[DataSpec(str(train_set))],
+        out_dir=str(tmp_path / "ft"),
+        weights_out=str(tmp_path / "ft" / "w.pt"),
+        epochs=1,
+        iters_per_epoch=2,
+        batch=2,
+        lr=0.0,  # no step: the parameters must stay those of the start weights
+        warmup_iters=1,
+        init_weights=str(tmp_path / "start.pt"),
+        # NetConfig() default: the start weights' (smaller) architecture must replace it
+    )
+    train(cfg, log=lambda _: None)
+    tuned = torch.load(tmp_path / "ft" / "last.pt", weights_only=False)["model"]
+    for name, p in start.named_parameters():
+        assert torch.equal(tuned[name], p.detach()), name
+    assert NetConfig.from_dict(cfg.net) == SMALL
+
+    cfg.init_weights = str(tmp_path / "missing.pt")
+    with pytest.raises(WeightsError, match="missing.pt: not found"):
+        train(cfg, log=lambda _: None)
