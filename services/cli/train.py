@@ -56,10 +56,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     )
     d.add_argument(
         "--precision",
-        choices=("bf16", "fp32"),
-        default="bf16",
+        choices=("auto", "bf16", "fp32"),
+        default="auto",
         help="autocast of the forward pass: bf16 is ~2x faster on CPUs with AVX512-BF16 and on "
-        "GPUs; fp32 on older CPUs, where bf16 is emulated and slow",
+        "GPUs, several times slower where the CPU lacks it; auto (default): bf16 where native",
     )
     d.add_argument(
         "--ema-decay",

@@ -213,6 +213,26 @@ def test_an_unknown_training_precision_is_refused_by_name() -> None:
         autocast(cfg, torch.device("cpu"))
 
 
+def test_auto_precision_is_bf16_only_on_a_cpu_that_computes_it_natively(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from services.detector import train as tr
+
+    info = tmp_path / "cpuinfo"
+    info.write_text("flags\t\t: fpu sse2 avx2 avx512f avx512_bf16 amx_tile\n")
+    assert tr.cpu_has_native_bf16(info)
+    info.write_text("flags\t\t: fpu sse2 avx2 fma\n")  # bf16 would be emulated
+    assert not tr.cpu_has_native_bf16(info)
+    assert not tr.cpu_has_native_bf16(tmp_path / "absent")
+    cpu = torch.device("cpu")
+    monkeypatch.setattr(tr, "cpu_has_native_bf16", lambda: False)
+    assert tr.resolve_precision("auto", cpu) == "fp32"
+    assert tr.resolve_precision("bf16", cpu) == "bf16"  # asked for: kept
+    monkeypatch.setattr(tr, "cpu_has_native_bf16", lambda: True)
+    assert tr.resolve_precision("auto", cpu) == "bf16"
+    assert tr.resolve_precision("fp32", cpu) == "fp32"
+
+
 def test_parallel_batches_are_the_same_for_any_worker_count_and_resume_point(
     tmp_path: Path,
 ) -> None:
@@ -290,5 +310,5 @@ def test_fine_tuning_starts_from_the_given_weights_and_keeps_their_architecture(
     assert NetConfig.from_dict(cfg.net) == SMALL
 
     cfg.init_weights = str(tmp_path / "missing.pt")
-    with pytest.raises(WeightsError, match="missing.pt: not found"):
+    with pytest.raises(WeightsError, match=r"missing\.pt: not found"):
         train(cfg, log=lambda _: None)
