@@ -146,11 +146,14 @@ def cmd_eval_detector(args: argparse.Namespace) -> int:
         print(_json(result))
         return 0
     t = Table(title=f"{low.name} on {args.data} ({m.images} images, {m.boxes} boxes)")
-    for col in ("AP50", "AP50:95", "precision", "recall", "threshold", "ms/frame", "p90 ms"):
+    cols = ("AP50", "AP50:95", "AP30", "box w/h", "precision", "recall", "threshold")
+    for col in (*cols, "ms/frame", "p90 ms"):
         t.add_column(col, justify="right")
     t.add_row(
         f"{m.ap50:.3f}",
         f"{m.ap50_95:.3f}",
+        f"{m.ap30:.3f}",
+        f"{m.box_width_ratio:.2f}/{m.box_height_ratio:.2f}",
         f"{m.precision:.3f}",
         f"{m.recall:.3f}",
         f"{m.score_threshold:.2f}",

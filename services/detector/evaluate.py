@@ -28,6 +28,12 @@ class DetectorMetrics:
     detections: int
     ap50: float
     ap50_95: float
+    # AP at IoU 0.3 and the median size of matched boxes (IoU >= 0.3, operating threshold)
+    # over their labels': where AP50 is low but AP30 high and the ratios far from 1, the
+    # labels draw boxes of another size than the detector (a label style), not missed fruit.
+    ap30: float
+    box_width_ratio: float
+    box_height_ratio: float
     precision: float
     recall: float
     score_threshold: float
@@ -69,6 +75,12 @@ def greedy_matches(gt: np.ndarray, det: np.ndarray, iou_min: float = 0.5) -> int
 
 def coco_ap(gts: Sequence[np.ndarray], dets: Sequence[np.ndarray]) -> tuple[float, float]:
     """(AP50, AP50:95) by pycocotools for one class; gts (N, 4), dets (K, 5) per image."""
+    aps = coco_aps(gts, dets)
+    return aps["ap50"], aps["ap50_95"]
+
+
+def coco_aps(gts: Sequence[np.ndarray], dets: Sequence[np.ndarray]) -> dict[str, float]:
+    """AP30, AP50 and AP50:95 by pycocotools (all areas, 100 detections per image)."""
     from pycocotools.coco import COCO
     from pycocotools.cocoeval import COCOeval
 
@@ -99,19 +111,46 @@ def coco_ap(gts: Sequence[np.ndarray], dets: Sequence[np.ndarray]) -> tuple[floa
                 }
             )
     if not anns:
-        return float("nan"), float("nan")
+        return dict.fromkeys(("ap30", "ap50", "ap50_95"), float("nan"))
     if not results:
-        return 0.0, 0.0
+        return dict.fromkeys(("ap30", "ap50", "ap50_95"), 0.0)
     with contextlib.redirect_stdout(io.StringIO()):  # pycocotools prints its progress
         gt = COCO()
         gt.dataset = {"images": images, "annotations": anns, "categories": [{"id": 1}]}
         gt.createIndex()
         dt = gt.loadRes(results)
         ev = COCOeval(gt, dt, "bbox")
+        # 0.3 ahead of COCO's ten thresholds: each threshold is matched on its own, so the
+        # others' figures are what summarize() gives without it.
+        ev.params.iouThrs = np.concatenate([[0.3], ev.params.iouThrs])
         ev.evaluate()
         ev.accumulate()
-        ev.summarize()
-    return float(ev.stats[1]), float(ev.stats[0])
+    # precision[T, recall, class, area, max detections]: area "all", 100 detections.
+    p = ev.eval["precision"][:, :, 0, 0, -1]
+
+    def mean(a: np.ndarray) -> float:
+        a = a[a > -1]
+        return float(a.mean()) if a.size else -1.0
+
+    return {"ap30": mean(p[0]), "ap50": mean(p[1]), "ap50_95": mean(p[1:])}
+
+
+def box_size_ratios(
+    gts: Sequence[np.ndarray], dets: Sequence[np.ndarray], iou_min: float = 0.3
+) -> tuple[float, float]:
+    """Median width and height of detections over their label's, for each label's best
+    detection with IoU >= iou_min (nan where none)."""
+    w, h = [], []
+    for g, d in zip(gts, dets, strict=True):
+        ious = iou_matrix(g, d[:, :4])
+        for i in range(len(g)):
+            if ious.shape[1] == 0 or ious[i].max() < iou_min:
+                continue
+            b = d[int(ious[i].argmax())]
+            w.append((b[2] - b[0]) / max(g[i, 2] - g[i, 0], 1e-9))
+            h.append((b[3] - b[1]) / max(g[i, 3] - g[i, 1], 1e-9))
+    nan = float("nan")
+    return (float(np.median(w)), float(np.median(h))) if w else (nan, nan)
 
 
 def evaluate(
@@ -121,7 +160,7 @@ def evaluate(
     progress: Callable[[int], None] | None = None,
 ) -> DetectorMetrics:
     """Run ``detect_all`` (low threshold, for AP) on every image, timing each call."""
-    gts, dets, ms = [], [], []
+    gts, dets, ops, ms = [], [], [], []
     tp = n_det = 0
     for i, s in enumerate(samples):
         rgb = s.load_rgb()
@@ -131,18 +170,23 @@ def evaluate(
         gts.append(s.boxes_xyxy_px)
         dets.append(d)
         op = d[d[:, 4] >= score_threshold]
+        ops.append(op)
         n_det += len(op)
         tp += greedy_matches(s.boxes_xyxy_px, op)
         if progress:
             progress(i + 1)
-    ap50, ap = coco_ap(gts, dets)
+    aps = coco_aps(gts, dets)
+    w_ratio, h_ratio = box_size_ratios(gts, ops)
     n_gt = int(sum(len(g) for g in gts))
     return DetectorMetrics(
         images=len(samples),
         boxes=n_gt,
         detections=n_det,
-        ap50=ap50,
-        ap50_95=ap,
+        ap50=aps["ap50"],
+        ap50_95=aps["ap50_95"],
+        ap30=aps["ap30"],
+        box_width_ratio=w_ratio,
+        box_height_ratio=h_ratio,
         precision=tp / n_det if n_det else 0.0,
         recall=tp / n_gt if n_gt else 0.0,
         score_threshold=score_threshold,

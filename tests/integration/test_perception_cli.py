@@ -14,9 +14,12 @@ def test_eval_detector_json_keys_and_bad_data(tmp_path: Path) -> None:
     r = harvest("eval", "detector", "--data", str(data), "--backend", "hsv", "--json")
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
-    for key in ("ap50", "ap50_95", "precision", "recall", "ms_per_frame"):
+    for key in ("ap50", "ap50_95", "ap30", "precision", "recall", "ms_per_frame"):
         assert isinstance(out[key], float), key
     assert out["ap50"] > 0.8  # flat orange discs on leaves: the colour baseline's home ground
+    assert out["ap30"] >= out["ap50"] and 0.8 < out["box_width_ratio"] < 1.25
+    r = harvest("eval", "detector", "--data", str(data), "--backend", "hsv")
+    assert r.returncode == 0 and "AP30" in r.stdout, r.stderr
     r = harvest("eval", "detector", "--data", str(tmp_path / "none.json"))
     assert r.returncode == 1 and "not found" in r.stderr
 

@@ -12,7 +12,13 @@ import pytest
 import torch
 
 from services.detector.data import DatasetError, load_dataset
-from services.detector.evaluate import coco_ap, greedy_matches, iou_matrix
+from services.detector.evaluate import (
+    box_size_ratios,
+    coco_ap,
+    coco_aps,
+    greedy_matches,
+    iou_matrix,
+)
 from services.detector.hsv import HsvDetector
 from services.detector.infer import OrangeDetector, WeightsError, load_weights, save_weights
 from services.detector.net import NetConfig, OrangeNet, decode
@@ -312,3 +318,18 @@ def test_fine_tuning_starts_from_the_given_weights_and_keeps_their_architecture(
     cfg.init_weights = str(tmp_path / "missing.pt")
     with pytest.raises(WeightsError, match=r"missing\.pt: not found"):
         train(cfg, log=lambda _: None)
+
+
+def test_ap30_and_box_ratios_tell_a_label_style_from_missed_fruit() -> None:
+    # Labels 1/0.65 the size of the (concentric) detections: IoU 0.4225, under AP50's 0.5.
+    gt = [np.array([[100.0, 100.0, 200.0, 200.0], [300.0, 100.0, 340.0, 140.0]])]
+    small = []
+    for x1, y1, x2, y2 in gt[0]:
+        cx, cy, w, h = (x1 + x2) / 2, (y1 + y2) / 2, (x2 - x1) * 0.65, (y2 - y1) * 0.65
+        small.append([cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2, 0.9])
+    dets = [np.array(small)]
+    aps = coco_aps(gt, dets)
+    assert aps["ap50"] == pytest.approx(0.0) and aps["ap30"] == pytest.approx(1.0)
+    assert box_size_ratios(gt, dets) == pytest.approx((0.65, 0.65))
+    assert coco_aps(gt, [np.array([[0.0, 0.0, 10.0, 10.0, 0.9]])])["ap30"] == pytest.approx(0.0)
+    assert np.isnan(box_size_ratios(gt, [np.zeros((0, 5))])).all()
