@@ -23,6 +23,7 @@ from services.detector.hsv import HsvDetector
 from services.detector.infer import OrangeDetector, WeightsError, load_weights, save_weights
 from services.detector.net import NetConfig, OrangeNet, decode
 from services.detector.targets import focal_loss, giou_loss, make_targets
+from services.detector.train import DataSpec, TrainConfig
 from services.testkit.scene2d import Scene2D
 
 SMALL = NetConfig(widths=(8, 8, 16, 16), blocks=(1, 1, 1), neck=8, input_w_px=64, input_h_px=48)
@@ -84,6 +85,23 @@ def test_weights_that_are_missing_or_do_not_match_are_refused_with_path_and_reas
     assert load_weights(good).version == "t"
 
 
+def tiny_config(out: Path, train_set: Path, val_set: Path, **kw: object) -> TrainConfig:
+    """A training run of the small network over a few scripted images, in ``out``."""
+    base: dict = dict(
+        train=[DataSpec(str(train_set))],
+        val=[DataSpec(str(val_set))],
+        out_dir=str(out),
+        weights_out=str(out / "w.pt"),
+        epochs=1,
+        iters_per_epoch=2,
+        batch=2,
+        eval_every=1,
+        warmup_iters=1,
+        net=SMALL.to_dict(),
+    )
+    return TrainConfig(**(base | kw))
+
+
 def write_dataset(root: Path, n: int, seed: int) -> Path:
     entries = []
     for k in range(n):
@@ -132,24 +150,13 @@ def test_hsv_baseline_finds_the_scripted_fruit() -> None:
 
 
 def test_training_is_seeded_and_resumes_to_the_same_weights(tmp_path: Path) -> None:
-    from services.detector.train import DataSpec, TrainConfig, finalize, train
+    from services.detector.train import finalize, train
 
     train_set = write_dataset(tmp_path, 4, 10)
     val_set = write_dataset(tmp_path, 2, 20)
 
     def cfg(out: str, epochs: int) -> TrainConfig:
-        return TrainConfig(
-            train=[DataSpec(str(train_set))],
-            val=[DataSpec(str(val_set))],
-            out_dir=str(tmp_path / out),
-            weights_out=str(tmp_path / out / "w.pt"),
-            epochs=epochs,
-            iters_per_epoch=2,
-            batch=2,
-            eval_every=1,
-            warmup_iters=1,
-            net=SMALL.to_dict(),
-        )
+        return tiny_config(tmp_path / out, train_set, val_set, epochs=epochs)
 
     quiet = lambda _: None  # noqa: E731
     train(cfg("a", 2), log=quiet)
@@ -268,19 +275,7 @@ def test_parallel_batches_are_the_same_for_any_worker_count_and_resume_point(
         drawn(-1)
 
     val_set = write_dataset(tmp_path, 2, 40)
-    cfg = TrainConfig(
-        train=[DataSpec(str(train_set))],
-        val=[DataSpec(str(val_set))],
-        out_dir=str(tmp_path / "w2"),
-        weights_out=str(tmp_path / "w2" / "w.pt"),
-        epochs=2,
-        iters_per_epoch=2,
-        batch=2,
-        eval_every=2,
-        warmup_iters=1,
-        workers=2,
-        net=SMALL.to_dict(),
-    )
+    cfg = tiny_config(tmp_path / "w2", train_set, val_set, epochs=2, eval_every=2, workers=2)
     summary = train(cfg, log=lambda _: None)
     assert [h["epoch"] for h in summary["history"]] == [0, 1]
     assert (tmp_path / "w2" / "last.pt").exists()
@@ -290,25 +285,16 @@ def test_parallel_batches_are_the_same_for_any_worker_count_and_resume_point(
 def test_fine_tuning_starts_from_the_given_weights_and_keeps_their_architecture(
     tmp_path: Path,
 ) -> None:
-    from services.detector.train import DataSpec, TrainConfig, train
+    from services.detector.train import train
 
     train_set = write_dataset(tmp_path, 4, 10)
     torch.manual_seed(7)
     start = OrangeNet(SMALL)
     save_weights(tmp_path / "start.pt", start, {"version": "v1-start"})
-    cfg = TrainConfig(
-        train=[DataSpec(str(train_set))],
-        val=[DataSpec(str(train_set))],
-        out_dir=str(tmp_path / "ft"),
-        weights_out=str(tmp_path / "ft" / "w.pt"),
-        epochs=1,
-        iters_per_epoch=2,
-        batch=2,
-        lr=0.0,  # no step: the parameters must stay those of the start weights
-        warmup_iters=1,
-        init_weights=str(tmp_path / "start.pt"),
-        # NetConfig() default: the start weights' (smaller) architecture must replace it
-    )
+    cfg = tiny_config(tmp_path / "ft", train_set, train_set)
+    cfg.lr = 0.0  # no step: the parameters must stay those of the start weights
+    cfg.init_weights = str(tmp_path / "start.pt")
+    cfg.net = NetConfig().to_dict()  # the start weights' (smaller) architecture must replace it
     train(cfg, log=lambda _: None)
     tuned = torch.load(tmp_path / "ft" / "last.pt", weights_only=False)["model"]
     for name, p in start.named_parameters():
