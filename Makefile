@@ -21,8 +21,8 @@ test: $(STAMP)
 	$(VENV)/bin/python -m pytest
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check schemas services tests
-	$(VENV)/bin/ruff format --check schemas services tests
+	$(VENV)/bin/ruff check schemas services tests deploy
+	$(VENV)/bin/ruff format --check schemas services tests deploy
 	$(VENV)/bin/mypy
 	$(VENV)/bin/python -m schemas.export
 

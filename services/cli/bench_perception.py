@@ -63,7 +63,15 @@ def cmd_bench_detector(args: argparse.Namespace) -> int:
         t0 = time.perf_counter()
         core.handle("camera/rgbd", frames[k % len(frames)])
         ms.append((time.perf_counter() - t0) * 1e3)
-    out = {"detector": core.name, "threads": args.threads, "frames": args.frames, **_stats(ms)}
+    out = {
+        "detector": core.name,
+        "threads": args.threads,
+        # The vector instructions torch's CPU kernels use (AVX2, AVX512...): the same network
+        # ran at 15-19 ms on an AVX512 CPU and 25-28 ms on an AVX2 one (BENCHMARKS.md).
+        "cpu": torch_cpu_capability(),
+        "frames": args.frames,
+        **_stats(ms),
+    }
     print(json.dumps(out, indent=2) if args.json else _line(f"detector {core.name}", out))
     return 0
 
@@ -106,6 +114,12 @@ def cmd_bench_tracker(args: argparse.Namespace) -> int:
     }
     print(json.dumps(out, indent=2) if args.json else _line("tracker", out))
     return 0
+
+
+def torch_cpu_capability() -> str:
+    import torch
+
+    return str(torch.backends.cpu.get_cpu_capability())
 
 
 def _line(what: str, out: dict) -> str:

@@ -1,4 +1,5 @@
-"""`harvest eval detector`, `harvest eval tracker`, `harvest bench tracker`: real runs, --json."""
+"""`harvest eval detector`, `harvest eval tracker`, `harvest bench detector|tracker`: real runs,
+--json."""
 
 from __future__ import annotations
 
@@ -43,3 +44,14 @@ def test_eval_tracker_json_keys_and_unknown_scenario() -> None:
     assert isinstance(out["id_switches"], int) and out["frames"] == 150
     r = harvest("eval", "tracker", "--scenario", "nowhere", "--seeds", "0")
     assert r.returncode == 1 and "scripted-sweep" in r.stderr
+
+
+def test_bench_detector_names_the_cpu_kernels_it_ran_on() -> None:
+    r = harvest("bench", "detector", "--frames", "3", "--json")
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert out["detector"].startswith("net:v1-") and out["frames"] == 3
+    import torch
+
+    assert out["cpu"] == torch.backends.cpu.get_cpu_capability()  # e.g. AVX2, AVX512
+    assert out["ms_median"] > 0.0
