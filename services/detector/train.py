@@ -314,10 +314,7 @@ def train(
         cfg.net = start.net.cfg.to_dict()
         log(f"fine-tuning from {cfg.init_weights} ({start.version})")
     ncfg = NetConfig.from_dict(cfg.net)
-    net = OrangeNet(ncfg)
-    if start is not None:
-        net.load_state_dict(start.net.state_dict())
-    net = net.to(device)
+    net = (start.net if start is not None else OrangeNet(ncfg)).to(device)
     opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     ema = WeightAverage(net, cfg.ema_decay) if cfg.ema_decay > 0 else None
     # What is validated, selected and saved (the average is a copy of the net: an OrangeNet).
