@@ -34,7 +34,7 @@ def pack_set(src_json: Path, out: Path, scale: float, quality: int) -> int:
             shutil.copyfile(s.path, out / name)
             w, h, k = s.width_px, s.height_px, 1.0
         else:
-            bgr = cv2.imread(str(s.path), cv2.IMREAD_COLOR)
+            bgr = cv2.cvtColor(s.load_rgb(), cv2.COLOR_RGB2BGR)  # checks it reads, and its size
             w, h, k = round(s.width_px * scale), round(s.height_px * scale), scale
             name = f"images/{i:06d}_{s.path.stem}.jpg"
             small = cv2.resize(bgr, (w, h), interpolation=cv2.INTER_AREA)
@@ -53,18 +53,20 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--quality", type=int, default=80)
     p.add_argument("--synth-cache", type=Path, default=Path("runs/synth"))
     a = p.parse_args(argv)
-    from services.detector.train import synth_dataset
+    from services.detector.data import DatasetError
+    from services.detector.train import DataSpec, resolve
 
     for arg in a.sets:
         name, sep, spec = arg.partition("=")
         if not sep or not name or "/" in name:
             p.error(f"{arg!r}: expected NAME=SET, NAME a plain folder name")
-        if spec.startswith("synth:"):
-            _, n, seed = spec.split(":")
-            src = synth_dataset(int(n), int(seed), a.synth_cache, print)
-        else:
-            src = Path(spec)
-        n_img = pack_set(src, a.out / name, a.scale, a.quality)
+        # As training reads it: synth:N:SEED rendered once into the cache, else a JSON file.
+        try:
+            src = Path(resolve([DataSpec(spec)], None, a.synth_cache, print)[0].json_path)
+            n_img = pack_set(src, a.out / name, a.scale, a.quality)
+        except DatasetError as exc:
+            print(f"pack.py: {name}: {exc}", file=sys.stderr)
+            return 1
         print(f"{name}: {n_img} images from {src}", file=sys.stderr)
     return 0
 

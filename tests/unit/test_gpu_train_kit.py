@@ -39,6 +39,7 @@ def test_pack_scales_renders_to_jpeg_and_copies_photos(tmp_path: Path) -> None:
     kept = load_dataset(tmp_path / "out" / "p" / "labels.json")[0]
     assert kept.path.read_bytes() == photo.read_bytes()
     assert kept.boxes_xyxy_px.tolist() == [[10, 10, 20, 30]]
+    assert pack.main([str(tmp_path / "out"), "bad=synth:x"]) == 1  # named, no traceback
 
 
 def test_training_runs_without_the_runtime_packages(tmp_path: Path) -> None:
