@@ -17,12 +17,17 @@ FruitFlag = Literal[
     "depth_inconsistent",
     "stale",
     "position_jump",
+    "kept",
 ]
 """Quality flags of a fruit's estimate: ``border_cut`` its box touches the image border;
 ``edge_occluded`` a nearer occluder cuts a side of its box (that semi-axis comes from the fruit's
 height/width ratio); ``box_invalid`` / ``depth_invalid`` / ``depth_inconsistent`` this frame's
 box or depth gave no estimate (the stored one is kept); ``stale`` not detected in this frame;
-``position_jump`` this frame's position was too far from the stored one (kept)."""
+``position_jump`` this frame's position was too far from the stored one (kept); ``kept`` beside
+any of these: the fruit was detected in this frame but the estimate is the stored one (a view
+cut on a side while a whole one is stored is flagged ``edge_occluded`` or ``border_cut`` and
+``kept``; without ``kept`` those two flags mark an estimate computed from this frame's cut
+view)."""
 
 
 class Fruit(Frozen):

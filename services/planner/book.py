@@ -71,7 +71,10 @@ a view cut by a hand can be 17 % too large)."""
 MIN_RECENT_VIEWS = 10
 """Recent views before their size is trusted as the fruit's."""
 
-CUT_FLAGS = {"edge_occluded", "border_cut"}
+CUT_FLAGS = {"edge_occluded", "border_cut", "kept"}
+"""Flags of a fresh view that ``_this_frames`` takes: cut on a side, whether the scene computed
+the estimate from it or kept its stored one (``kept``). Only ``_reused`` tells the two apart:
+the other rules were measured with both."""
 
 CUT_VIEWS = 9
 """Fresh views of its own size (0.6 s at 15 Hz) whose median a target never seen whole follows.
@@ -161,6 +164,7 @@ class FruitBook:
     switches: list[tuple[int, int, int]] = field(default_factory=list)  # (key, old, new)
     moved: list[tuple[int, float]] = field(default_factory=list)  # (key, metres)
     reborn: list[tuple[int, int, int]] = field(default_factory=list)  # (old key, new key, ID)
+    kept_far: list[tuple[int, int]] = field(default_factory=list)  # (key, ID): not reborn
     # The record the tools go for (approach, harvest; planner.target_hangs_over_dish): our dish
     # is under it by design, so a sighting of it in the dish is not of a fruit in the basket.
     hanging_key: int | None = None
@@ -230,8 +234,16 @@ class FruitBook:
         c = rec.planned.centre_world_m
         if np.linalg.norm(p - c) <= self.same_fruit_m:
             return False
-        fallen = rec.outcome == "dropped" and p[2] < c[2] - self.same_fruit_m
-        return not fallen
+        if rec.outcome == "dropped" and p[2] < c[2] - self.same_fruit_m:
+            return False  # fallen
+        if "kept" in f.flags:
+            # The view was cut and the scene kept its stored estimate: not where the fruit is
+            # now (orchard seed 15: a harvested fruit's estimate from mid-fall, 4.1 cm under
+            # where it hung, kept while the fruit lay in our dish cut by the rim, became a new
+            # fruit, and the cutter closed on nothing for 8 s).
+            self.kept_far.append((rec.key, f.fruit_id))
+            return False
+        return True
 
     def _reborn(self, rec: FruitRecord, f: Fruit, now: dict[int, Fruit]) -> int:
         """``f``'s ID leaves ``rec`` for the record of the fruit it is on now: a known one, or a
@@ -421,8 +433,9 @@ def _planned_smaller(rec: FruitRecord) -> bool:
 
 
 def _this_frames(f: Fruit) -> bool:
-    """The scene computed this estimate from this frame's view (whole or cut on a side):
-    nothing kept from an earlier frame."""
+    """A view of this frame, whole or cut on a side, that gave no failure: no stale estimate,
+    none kept for want of depth or for a jump. A cut view may have left the stored estimate in
+    place (``kept``; ``CUT_FLAGS``)."""
     return f.frames_unseen == 0 and set(f.flags) <= CUT_FLAGS
 
 

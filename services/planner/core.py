@@ -176,6 +176,9 @@ class PlannerCore:
             for old, new, fid in self.book.reborn:
                 log.info("track ID %d left fruit %d: another fruit (record %d)", fid, old, new)
             self.book.reborn.clear()
+            for key, fid in self.book.kept_far:
+                log.debug("track ID %d far from fruit %d in a kept estimate: not another", fid, key)
+            self.book.kept_far.clear()
         contacts = self.contacts
         self._count_contacts(st)
         m = self.machine

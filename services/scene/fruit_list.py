@@ -91,7 +91,7 @@ class FruitList:
             e = self.entries.get(fid)
             if e is not None:  # kept from its last good state, flagged
                 e.frames_unseen, e.last_seen_stamp_ns = 0, stamp_ns
-                e.flags = _flags(e.state.flags, reason)
+                e.flags = _flags(_flags(e.state.flags, reason), "kept")
         for fid in sorted(set(self.entries) - seen):
             e = self.entries[fid]
             e.frames_unseen += 1
@@ -116,7 +116,7 @@ class FruitList:
         if n > 0 and len(e.jump) >= n:
             e.state, e.flags, e.jump = m, m.flags, []
             return [f"fruit {e.fruit_id} moved {jump:.3f} m (confirmed by {n} frames)"]
-        e.flags = _flags(e.state.flags, "position_jump")
+        e.flags = _flags(_flags(e.state.flags, "position_jump"), "kept")
         return [f"fruit {e.fruit_id}: kept its state, new position {jump:.3f} m away"]
 
     def mark(self, fruit_id: int, mark: Mark) -> None:

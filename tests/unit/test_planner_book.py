@@ -272,6 +272,24 @@ def test_a_harvested_fruits_estimate_kept_from_mid_fall_does_not_make_it_a_new_f
     assert sorted(b.records) == [-1, 1]
 
 
+def test_a_harvested_fruits_estimate_kept_for_a_cut_view_does_not_make_it_a_new_fruit() -> None:
+    # orchard seed 15: the estimate from mid-fall, 4.1 cm under where the fruit hung, kept by
+    # the scene while the fruit lay in our dish cut by the rim (flagged edge_occluded and kept),
+    # became a new fruit, and the cutter closed on nothing for 8 s.
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    b.update(scene(fruit(3, (0.544, -0.129, 1.383))), never)
+    b.records[3].outcome = "harvested"
+    kept = fruit(3, (0.538, -0.127, 1.343)).model_copy(
+        update={"flags": ("edge_occluded", "kept"), "status": "harvested"}
+    )
+    for _ in range(MIN_SIGHTINGS):
+        b.update(scene(kept), never)
+    assert sorted(b.records) == [3] and b.candidates(45) == []
+    assert b.kept_far == [(3, 3)] * MIN_SIGHTINGS  # the planner logs each one
+    b.update(scene(kept.model_copy(update={"flags": ("edge_occluded",)})), never)
+    assert sorted(b.records) == [-1, 3]  # a cut view the scene computed: another fruit
+
+
 def test_a_view_with_its_top_hidden_does_not_move_a_target_planned_from_a_whole_one() -> None:
     # paper-exp2 seed 12: an unflagged view with d_v 1.7 cm (of 3.6), its centre 2 cm low; the
     # target followed it and both cuts went 1.6 cm under the peduncle.

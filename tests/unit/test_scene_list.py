@@ -27,7 +27,7 @@ def test_a_jump_is_kept_out_as_a_temporary_id_error() -> None:
     fl.step(0, {1: m(0.6)}, {})
     fl.step(1, {1: m(0.6, y=0.2)}, {})  # the ID briefly lands on another fruit
     assert fl.entries[1].state.position_world_m[1] == 0.0
-    assert "position_jump" in fl.entries[1].flags
+    assert {"position_jump", "kept"} <= set(fl.entries[1].flags)
     fl.step(2, {1: m(0.6)}, {})
     assert fl.entries[1].flags == () and fl.entries[1].state.position_world_m[1] == 0.0
 
@@ -66,7 +66,7 @@ def test_a_fruit_seen_without_depth_keeps_its_last_good_state_flagged() -> None:
     fl.step(1, {}, {1: "depth_invalid"})
     e = fl.entries[1]
     assert e.frames_unseen == 0 and e.state.position_world_m[0] == 0.6
-    assert e.flags == ("depth_invalid",)
+    assert e.flags == ("depth_invalid", "kept")
     fl.step(2, {}, {2: "depth_invalid"})  # a new ID without depth does not enter the list
     assert 2 not in fl.entries
 
@@ -100,3 +100,15 @@ def test_marks_outlive_the_entry() -> None:
     assert fl.selected() is None
     fl.mark(1, "unreachable")  # a later skip does not undo a harvest
     assert fl.marks[1] == "harvested"
+
+
+def test_a_cut_view_that_keeps_the_stored_state_says_so_and_a_measurement_clears_it() -> None:
+    # The planner must tell a cut view the scene computed from one it kept the stored state
+    # for: both carry edge_occluded, and only the first is where the fruit is now.
+    fl = FruitList(ListParams())
+    fl.step(0, {1: m(0.6)}, {})
+    fl.step(1, {}, {1: "edge_occluded"})
+    e = fl.entries[1]
+    assert e.frames_unseen == 0 and e.flags == ("edge_occluded", "kept")
+    fl.step(2, {1: m(0.61)}, {})
+    assert fl.entries[1].flags == ()
