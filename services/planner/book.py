@@ -121,7 +121,12 @@ class FruitRecord:
     scene_mark_ok: bool = True  # False: its ID was another fruit's, whose scene mark it carries
     reach: tuple[ReachVerdict, ReachVerdict] | None = None  # harvest pose, pre-pose
     last_seen_ns: int | None = None  # the last scene stamp with a fresh sighting of any of its IDs
-    sightings: int = 0  # scene states with a fresh sighting of it outside our dish
+    # Scene states with a fresh sighting of it outside our dish; for a record whose ID was
+    # another fruit's (``scene_mark_ok`` False) only those the scene measured, not ``kept`` ones
+    # (orchard seed 7: a track that had been a harvested fruit's came back with one estimate
+    # 38 cm from it, at no fruit; that estimate, kept by the scene for 7 s, made a fruit the
+    # cutter then closed on twice, 11-31 cm from any peduncle).
+    sightings: int = 0
     sizes_m: deque[tuple[float, float]] = field(
         default_factory=lambda: deque(maxlen=RECENT_VIEWS)
     )  # (d_h, d_v) of its recent fresh views: what size it has shown
@@ -192,7 +197,8 @@ class FruitBook:
                 self._observe(rec, f, in_dish)
             if f.frames_unseen == 0 and not in_dish(f):
                 rec.last_seen_ns = scene.header.stamp_ns
-                rec.sightings += 1
+                if rec.scene_mark_ok or "kept" not in f.flags:
+                    rec.sightings += 1
         for key in sorted(self.records):
             self.records[key].in_scene = key in present
 
