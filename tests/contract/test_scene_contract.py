@@ -163,7 +163,7 @@ def test_no_valid_depth_keeps_the_fruit_from_its_last_good_state() -> None:
     ]
     (a, b), node = feed(script)
     assert b.fruits[0].position_world_m == a.fruits[0].position_world_m
-    assert b.fruits[0].flags == ("depth_invalid",) and b.fruits[0].frames_unseen == 0
+    assert b.fruits[0].flags == ("depth_invalid", "kept") and b.fruits[0].frames_unseen == 0
     assert node.core.counters["fruit_depth_invalid"] == 1
     # Nothing bark-coloured with depth: the trunk keeps its estimate, unseen for one frame.
     assert node.core.counters["trunk_mask_empty"] == 1
