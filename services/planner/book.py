@@ -91,11 +91,7 @@ MIN_SIGHTINGS = 3
 way: a fruit on the tree shows in many (15 a second), a flash does not (paper-exp2 seed 11:
 a harvested fruit flung out of the dish, seen once at the image border 30 cm from the tree,
 was called unreachable and, listed for seconds, gave two fruit up as blocked by it). The
-controller still avoids whatever the scene lists. Only estimates the scene computed from the
-frame count, not those it kept (flag ``kept``): a flash measured once and then kept is still a
-flash (paper-exp1 seed 8: a new track measured once, 15 cm from any fruit, then kept 13 times,
-was cut at twice for 8 s; orchard seed 7: a harvested fruit's track came back with one estimate
-38 cm away, at no fruit, kept for 7 s, and was cut at twice, 11-31 cm from any peduncle)."""
+controller still avoids whatever the scene lists."""
 
 
 @dataclass
@@ -125,7 +121,7 @@ class FruitRecord:
     scene_mark_ok: bool = True  # False: its ID was another fruit's, whose scene mark it carries
     reach: tuple[ReachVerdict, ReachVerdict] | None = None  # harvest pose, pre-pose
     last_seen_ns: int | None = None  # the last scene stamp with a fresh sighting of any of its IDs
-    sightings: int = 0  # scene states that measured it outside our dish (``MIN_SIGHTINGS``)
+    sightings: int = 0  # scene states with a fresh sighting of it outside our dish
     sizes_m: deque[tuple[float, float]] = field(
         default_factory=lambda: deque(maxlen=RECENT_VIEWS)
     )  # (d_h, d_v) of its recent fresh views: what size it has shown
@@ -196,8 +192,7 @@ class FruitBook:
                 self._observe(rec, f, in_dish)
             if f.frames_unseen == 0 and not in_dish(f):
                 rec.last_seen_ns = scene.header.stamp_ns
-                if "kept" not in f.flags:  # the scene measured it in this frame
-                    rec.sightings += 1
+                rec.sightings += 1
         for key in sorted(self.records):
             self.records[key].in_scene = key in present
 

@@ -290,33 +290,6 @@ def test_a_harvested_fruits_estimate_kept_for_a_cut_view_does_not_make_it_a_new_
     assert sorted(b.records) == [-1, 3]  # a cut view the scene computed: another fruit
 
 
-def test_a_fruit_is_confirmed_by_views_the_scene_measured_not_by_kept_ones() -> None:
-    # orchard seed 7: a harvested fruit's track came back with one estimate 38 cm away, at no
-    # fruit, which the scene then kept for 7 s; that was taken for a fruit and cut at twice.
-    # paper-exp1 seed 8: the same with a new track (one estimate, kept 13 times).
-    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
-    b.update(scene(fruit(15, (0.53, 0.146, 1.31))), never)
-    b.records[15].outcome = "harvested"
-    stray = fruit(15, (0.64, -0.222, 1.356))
-    b.update(scene(stray, fruit(54, (0.677, -0.026, 1.157))), never)  # measured once
-    kept = {"flags": ("position_jump", "kept")}
-    for _ in range(5):
-        b.update(
-            scene(
-                stray.model_copy(update=kept),
-                fruit(54, (0.677, -0.026, 1.157), stamp=1).model_copy(
-                    update={"flags": ("edge_occluded", "kept")}
-                ),
-            ),
-            never,
-        )
-    assert b.records[-1].sightings == 1 and b.records[54].sightings == 1
-    assert b.candidates(45) == []
-    for _ in range(MIN_SIGHTINGS - 1):
-        b.update(scene(stray), never)  # measured again: a fruit after all
-    assert b.candidates(45) == [b.records[-1]]
-
-
 def test_a_view_with_its_top_hidden_does_not_move_a_target_planned_from_a_whole_one() -> None:
     # paper-exp2 seed 12: an unflagged view with d_v 1.7 cm (of 3.6), its centre 2 cm low; the
     # target followed it and both cuts went 1.6 cm under the peduncle.
