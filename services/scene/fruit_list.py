@@ -91,7 +91,7 @@ class FruitList:
             e = self.entries.get(fid)
             if e is not None:  # kept from its last good state, flagged
                 e.frames_unseen, e.last_seen_stamp_ns = 0, stamp_ns
-                e.flags = _flags(_flags(e.state.flags, reason), "kept")
+                e.flags = _flags(e.state.flags, reason, "kept")
         for fid in sorted(set(self.entries) - seen):
             e = self.entries[fid]
             e.frames_unseen += 1
@@ -116,7 +116,7 @@ class FruitList:
         if n > 0 and len(e.jump) >= n:
             e.state, e.flags, e.jump = m, m.flags, []
             return [f"fruit {e.fruit_id} moved {jump:.3f} m (confirmed by {n} frames)"]
-        e.flags = _flags(_flags(e.state.flags, "position_jump"), "kept")
+        e.flags = _flags(e.state.flags, "position_jump", "kept")
         return [f"fruit {e.fruit_id}: kept its state, new position {jump:.3f} m away"]
 
     def mark(self, fruit_id: int, mark: Mark) -> None:
@@ -151,5 +151,5 @@ def _dist(a: Measurement, b: Measurement) -> float:
     return float(np.linalg.norm(a.position_world_m - b.position_world_m))
 
 
-def _flags(base: tuple[FruitFlag, ...], extra: FruitFlag) -> tuple[FruitFlag, ...]:
-    return base if extra in base else (*base, extra)
+def _flags(base: tuple[FruitFlag, ...], *extra: FruitFlag) -> tuple[FruitFlag, ...]:
+    return (*base, *(x for x in extra if x not in base))

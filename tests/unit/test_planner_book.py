@@ -121,9 +121,7 @@ def test_a_fruit_in_the_basket_seen_by_its_top_above_the_rim_is_still_in_the_dis
     seen = np.array([0.443, -0.051, 1.349])
     assert not inside_dish(seen, dish, 0.02)  # as a fruit hanging over it would be judged
     assert inside_dish(seen, dish, 0.02, above_rim_m=0.05)  # as a fruit known to be in it
-    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
-    b.update(scene(fruit(1, (0.529, -0.05, 1.469))), never)
-    b.records[1].outcome = "harvested"
+    b = harvested_book(1, (0.529, -0.05, 1.469))
     asked: list[bool] = []
 
     def in_dish(f: Fruit, resting: bool = False) -> bool:
@@ -255,13 +253,19 @@ def test_a_harvested_fruit_seen_in_the_dish_or_a_dropped_one_seen_fallen_is_not_
     assert sorted(b.records) == [2, 3] and b.candidates(45) == []
 
 
+def harvested_book(fid: int, hung: tuple[float, float, float]) -> FruitBook:
+    """A book with one fruit, seen where it hung, harvested."""
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    b.update(scene(fruit(fid, hung)), never)
+    b.records[fid].outcome = "harvested"
+    return b
+
+
 def test_a_harvested_fruits_estimate_kept_from_mid_fall_does_not_make_it_a_new_fruit() -> None:
     # paper-exp1 seed 11, planned: the scene kept a harvested fruit's estimate from its fall
     # (its later views gave no depth), 4.5 cm outside the dish; the planner took it for a new
     # fruit, and the approach to it stalled and blocked the fruit beside it.
-    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
-    b.update(scene(fruit(1, (0.529, -0.05, 1.469))), never)
-    b.records[1].outcome = "harvested"
+    b = harvested_book(1, (0.529, -0.05, 1.469))
     kept = fruit(1, (0.477, -0.063, 1.3)).model_copy(
         update={"flags": ("edge_occluded", "depth_inconsistent"), "status": "harvested"}
     )
@@ -276,9 +280,7 @@ def test_a_harvested_fruits_estimate_kept_for_a_cut_view_does_not_make_it_a_new_
     # orchard seed 15: the estimate from mid-fall, 4.1 cm under where the fruit hung, kept by
     # the scene while the fruit lay in our dish cut by the rim (flagged edge_occluded and kept),
     # became a new fruit, and the cutter closed on nothing for 8 s.
-    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
-    b.update(scene(fruit(3, (0.544, -0.129, 1.383))), never)
-    b.records[3].outcome = "harvested"
+    b = harvested_book(3, (0.544, -0.129, 1.383))
     kept = fruit(3, (0.538, -0.127, 1.343)).model_copy(
         update={"flags": ("edge_occluded", "kept"), "status": "harvested"}
     )
