@@ -12,6 +12,7 @@ from services.planner.book import MIN_SIGHTINGS
 from services.planner.clutter import blockers, clearable
 from services.planner.core import PlannerCore
 from services.planner.kinematics import ReachVerdict
+from services.planner.machine import NS
 from services.runtime.settings import load_settings
 
 # Per clutter.blockers: B hangs where A's dish goes, C where B's dish goes, C free; D and E
@@ -111,6 +112,34 @@ def test_planned_waits_for_a_blocker_deferred_after_a_stuck_attempt() -> None:
     assert select(core) == 2
     harvest(core, 2)
     assert select(core) == 1
+
+
+def test_nearest_waits_for_a_hidden_blocker_then_gives_up_once_it_stays_away() -> None:
+    # Orchard seed 15: A, deferred as blocked by B, was given up while the arms hid B; B
+    # showed again 0.3 s later. Now the arms wait at the ready pose while B is hidden.
+    core = core_with("nearest", fruit(1, A, 0.5), fruit(2, B, 0.6))
+    core.book.records[1].deferred = True
+    hidden_b = fruit(2, B, 0.6).model_copy(update={"frames_unseen": 50})  # past lost_after
+    seen_at_ns = 3 * NS
+    core.book.update(
+        SceneState(
+            header=Header(stamp_ns=seen_at_ns, seq=MIN_SIGHTINGS, source="scene"),
+            fruits=(fruit(1, A, 0.5), hidden_b),
+            trunk=Trunk(found=False),
+            obstacles=Obstacles(),
+        ),
+        lambda _f, resting=False: False,
+    )
+    m, a = core.machine, core.book.records[1]
+    m.phase = "leave"
+    m._select(seen_at_ns)
+    assert m.target is None and m.phase == "home" and not a.finished
+    assert "#1 waits for #2 (hidden)" in m.events[-1].reason
+    wait_s = core.s.hidden_wait_s
+    m._select(int((wait_s - 0.1) * NS))  # still waiting, B last seen at 0 s
+    assert not a.finished
+    m._select(int((wait_s + 0.1) * NS))  # B stayed away: nothing can clear A's way
+    assert a.outcome == "unreachable" and "blocked by #2" in a.reason
 
 
 @pytest.mark.parametrize("order", ["nearest", "planned"])
