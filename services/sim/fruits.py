@@ -84,24 +84,28 @@ class Fruits:
 
     def cut(self, tip: np.ndarray, tolerance_m: float) -> list[Ev]:
         """Close the shears at ``tip``: the nearest attached peduncle within tolerance is cut."""
-        best: tuple[float, FruitStatus] | None = None
+        best: tuple[float, np.ndarray, FruitStatus] | None = None
         for s in self.all:
             if s.state == "attached":
-                d = _segment_distance(tip, *s.peduncle())
+                off = _segment_offset(tip, *s.peduncle())
+                d = float(np.linalg.norm(off))
                 if best is None or d < best[0]:
-                    best = (d, s)
+                    best = (d, off, s)
         if best is None:
             return [Ev("cut_missed", detail="no attached fruit left")]
-        d, s = best
+        d, off, s = best
         fid = s.fruit.fruit_id
         if d > tolerance_m:
+            # The offset's direction tells a biased fruit estimate from noise (the judge's view).
+            dx, dy, dz = off
             return [
                 Ev(
                     "cut_missed",
                     fid,
                     "cutter_tip",
                     f"fruit_{fid}",
-                    f"nearest peduncle {d:.4f} m away (fruit {fid}), tolerance {tolerance_m} m",
+                    f"nearest peduncle {d:.4f} m away (fruit {fid}), tolerance {tolerance_m} m; "
+                    f"tip minus peduncle, world: ({dx:+.4f}, {dy:+.4f}, {dz:+.4f}) m",
                 )
             ]
         s.state = "falling"
@@ -167,7 +171,8 @@ class Fruits:
         return bool(np.hypot(x, y) < TOOLS.basket_radius_m and -0.01 < z < rim)
 
 
-def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+def _segment_offset(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``p`` minus its nearest point on the segment a–b."""
     ab = b - a
     t = float(np.clip((p - a) @ ab / max(ab @ ab, 1e-12), 0.0, 1.0))
-    return float(np.linalg.norm(p - (a + t * ab)))
+    return np.asarray(p - (a + t * ab), dtype=float)

@@ -141,6 +141,7 @@ def test_a_cut_3_cm_from_the_peduncle_fails(tmp_path: Path) -> None:
     outs = run_ticks(c, 10)
     (missed,) = events(outs, "cut_missed")
     assert "0.0300 m" in missed.detail
+    assert "0.0000, -0.0300, +0.0000) m" in missed.detail  # tip minus peduncle: fruit 3 cm on +y
     assert c.fruits.all[0].state == "attached" and c.counters["cuts_missed"] == 1
     assert [m.fruit_count for t, m in outs if t == "robot/basket"] == [0]
 
