@@ -459,6 +459,38 @@ def retraces(events: Sequence[Any]) -> dict[str, int]:
     return {"retraces": started, "retraces_short": short}
 
 
+AT_NOTHING_M = 0.05  # a cut this far from every peduncle closed on no fruit at all
+
+
+def cuts(sim_events: Sequence[Any]) -> dict[str, int]:
+    """The shears' closings as the sim judged them: hits, misses, misses at nothing (more than
+    ``AT_NOTHING_M`` from every peduncle: a phantom target), and retries: a cut near a fruit
+    whose last cut missed it narrowly, and those that hit (a retry from the same estimate
+    closes where the first cut missed)."""
+    from services.sim.fruits import missed_distance_m
+
+    out = dict.fromkeys(("cuts", "cuts_missed", "cuts_at_nothing", "retry_cuts"), 0)
+    out["retry_cuts_hit"] = 0
+    near_miss: set[int | None] = set()  # fruit whose last cut missed them narrowly
+    for e in sim_events:
+        if e.kind not in ("cut", "cut_missed"):
+            continue
+        hit = e.kind == "cut"
+        d_m = None if hit else missed_distance_m(e.detail)
+        far = not hit and (d_m is None or d_m > AT_NOTHING_M)
+        out["cuts"] += 1
+        out["cuts_missed"] += not hit
+        out["cuts_at_nothing"] += far
+        if e.fruit_id in near_miss:
+            out["retry_cuts"] += 1
+            out["retry_cuts_hit"] += hit
+        if hit:
+            near_miss.discard(e.fruit_id)
+        elif not far:
+            near_miss.add(e.fruit_id)
+    return out
+
+
 def approach_plans(events: Sequence[Any]) -> dict[str, int]:
     """Planned approaches (plan_approach): paths found and followed, none found, paths left
     short of their end. A plan is reported by the phase change into the approach ('always')
@@ -529,6 +561,7 @@ def evaluate(got: Collected, first_truth: GroundTruth, judged: Truth) -> dict[st
         "reachable_fates": _fates(record, reachable, collected, first_truth),
         **retraces(got.harvest_events),
         **approach_plans(got.harvest_events),
+        **cuts(got.sim_events),
         "summary": s.model_dump(mode="json", exclude={"header"}) if s is not None else None,
     }
 
@@ -662,6 +695,11 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "approach_paths",
             "approach_no_path",
             "approach_paths_short",
+            "cuts",
+            "cuts_missed",
+            "cuts_at_nothing",
+            "retry_cuts",
+            "retry_cuts_hit",
         )
     }
     cycles = [c for r in rows for c in r["cycles_s"]]
@@ -711,6 +749,11 @@ def table(result: dict[str, Any]) -> str:
         ("approach_paths", "planned approach paths"),
         ("approach_paths_short", "  of which left short"),
         ("approach_no_path", "planned approaches without a path"),
+        ("cuts", "cuts (shears closed)"),
+        ("cuts_missed", "  of which missed"),
+        ("cuts_at_nothing", "  of which > 5 cm from any peduncle"),
+        ("retry_cuts", "cuts after a near miss"),
+        ("retry_cuts_hit", "  of which hit"),
         ("wall_s", "wall s"),
         ("rtf", "real-time factor"),
     )

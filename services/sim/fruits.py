@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -14,6 +15,14 @@ from services.sim.world import Fruit, World
 SETTLE_S = 0.25  # a fruit inside the dish and touching it this long is collected
 REST_S = 2.0  # a falling fruit at rest outside the basket this long is dropped
 REST_SPEED_M_S = 0.02
+_MISSED = re.compile(r"^nearest peduncle ([0-9.]+) m away")  # cut()'s cut_missed detail
+
+
+def missed_distance_m(detail: str) -> float | None:
+    """The distance from the tip to the nearest peduncle a ``cut_missed`` event's detail gives
+    (None: no attached fruit was left)."""
+    m = _MISSED.match(detail)
+    return float(m.group(1)) if m else None
 
 
 @dataclass(frozen=True)

@@ -148,3 +148,35 @@ def test_planned_approaches_are_counted_from_the_planners_events() -> None:
         "approach_no_path": 2,
         "approach_paths_short": 2,
     }
+
+
+def test_cuts_at_nothing_and_retries_are_told_apart() -> None:
+    from schemas.sim import SimEvent
+
+    def ev(kind: str, fid: int, d_m: float = 0.005) -> SimEvent:
+        # The sim's wording (services/sim/fruits.py; its test reads one back).
+        missed = f"nearest peduncle {d_m:.4f} m away (fruit {fid}), tolerance 0.015 m; …"
+        return SimEvent(
+            header=Header(stamp_ns=0, seq=0, source="sim"),
+            kind=kind,  # type: ignore[arg-type]
+            fruit_id=fid,
+            detail=missed if kind == "cut_missed" else f"tip {d_m:.4f} m from the peduncle",
+        )
+
+    events = [
+        ev("cut", 1),
+        ev("cut_missed", 2, 0.021),  # a near miss …
+        ev("cut_missed", 2, 0.019),  # … its retry missed too
+        ev("cut_missed", 3, 0.030),
+        ev("cut", 3),  # a retry that hit
+        ev("cut_missed", 4, 0.178),  # at nothing: no retry of fruit 4 after it
+        ev("cut_missed", 4, 0.175),
+        ev("collected", 1),
+    ]
+    assert bench.cuts(events) == {
+        "cuts": 7,
+        "cuts_missed": 5,
+        "cuts_at_nothing": 2,
+        "retry_cuts": 2,
+        "retry_cuts_hit": 1,
+    }

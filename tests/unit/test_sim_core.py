@@ -11,6 +11,7 @@ import pytest
 
 from schemas.topics import TOPICS
 from services.robot.model import velocity_limits_rad_s
+from services.sim.fruits import missed_distance_m
 from tests.sim_helpers import (
     command,
     core,
@@ -142,6 +143,7 @@ def test_a_cut_3_cm_from_the_peduncle_fails(tmp_path: Path) -> None:
     (missed,) = events(outs, "cut_missed")
     assert "0.0300 m" in missed.detail
     assert "0.0000, -0.0300, +0.0000) m" in missed.detail  # tip minus peduncle: fruit 3 cm on +y
+    assert missed_distance_m(missed.detail) == pytest.approx(0.03)  # as the harvest bench reads
     assert c.fruits.all[0].state == "attached" and c.counters["cuts_missed"] == 1
     assert [m.fruit_count for t, m in outs if t == "robot/basket"] == [0]
 
