@@ -460,6 +460,7 @@ def retraces(events: Sequence[Any]) -> dict[str, int]:
 
 
 AT_NOTHING_M = 0.05  # a cut this far from every peduncle closed on no fruit at all
+CUT_KEYS = ("cuts", "cuts_missed", "cuts_at_nothing", "retry_cuts", "retry_cuts_hit")
 
 
 def cuts(sim_events: Sequence[Any]) -> dict[str, int]:
@@ -469,8 +470,7 @@ def cuts(sim_events: Sequence[Any]) -> dict[str, int]:
     closes where the first cut missed)."""
     from services.sim.fruits import missed_distance_m
 
-    out = dict.fromkeys(("cuts", "cuts_missed", "cuts_at_nothing", "retry_cuts"), 0)
-    out["retry_cuts_hit"] = 0
+    out = dict.fromkeys(CUT_KEYS, 0)
     near_miss: set[int | None] = set()  # fruit whose last cut missed them narrowly
     for e in sim_events:
         if e.kind not in ("cut", "cut_missed"):
@@ -695,11 +695,7 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "approach_paths",
             "approach_no_path",
             "approach_paths_short",
-            "cuts",
-            "cuts_missed",
-            "cuts_at_nothing",
-            "retry_cuts",
-            "retry_cuts_hit",
+            *CUT_KEYS,
         )
     }
     cycles = [c for r in rows for c in r["cycles_s"]]
@@ -751,7 +747,7 @@ def table(result: dict[str, Any]) -> str:
         ("approach_no_path", "planned approaches without a path"),
         ("cuts", "cuts (shears closed)"),
         ("cuts_missed", "  of which missed"),
-        ("cuts_at_nothing", "  of which > 5 cm from any peduncle"),
+        ("cuts_at_nothing", f"  of which > {AT_NOTHING_M * 100:.0f} cm from any peduncle"),
         ("retry_cuts", "cuts after a near miss"),
         ("retry_cuts_hit", "  of which hit"),
         ("wall_s", "wall s"),
