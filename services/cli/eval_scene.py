@@ -128,12 +128,15 @@ GOALS = {
 def print_table(out: dict) -> None:
     from rich.table import Table
 
+    from services.scene.evaluate import VISIBLE_SHARE
+
     con = console()
     noise = f", box noise σ {out['box_noise_px']} px" if out["box_noise_px"] else ""
     t = Table(title=f"scene vs sim/truth: {out['scenario']}, seeds {_seeds(out['seeds'])}{noise}")
     t.add_column("figure")
     t.add_column("value", justify="right")
     t.add_column("goal", justify="right")
+    whole, part = f"≥ {VISIBLE_SHARE:.0%}", f"{out['min_visible']:.0%}-{VISIBLE_SHARE:.0%}"
     rows = [
         ("fruit centre error, median", "center_err_median_m"),
         ("fruit centre error, p95", "center_err_p95_m"),
@@ -141,6 +144,10 @@ def print_table(out: dict) -> None:
         ("d_v error, median", "dv_err_median_m"),
         ("d_v error, p95", "dv_err_p95_m"),
         ("d_h error, median", "dh_err_median_m"),
+        (f"range bias, fruit {whole} visible (−: nearer)", "range_bias_visible_m"),
+        (f"range bias, fruit {part} visible", "range_bias_hidden_m"),
+        (f"d_h bias, fruit {whole} visible", "dh_bias_visible_m"),
+        (f"d_h bias, fruit {part} visible", "dh_bias_hidden_m"),
         ("trunk axis error (horizontal), median", "trunk_err_m"),
         ("trunk axis error (horizontal), p95", "trunk_err_p95_m"),
     ]

@@ -8,6 +8,10 @@ measure localisation alone. Compared with sim/truth of the same frame:
 * fruit centre error (3D, world frame), |d_v - truth vertical semi-axis| and |d_h - truth
   horizontal semi-axis|, for every fruit measured in that frame (``frames_unseen == 0``, no
   failure flag) whose true centre is ``range_m`` (0.4-1.0 m) from the camera's optical centre;
+* the bias along the camera ray: the estimate's distance from the optical centre minus the
+  truth's (negative: nearer the camera), and d_h's signed error, split into fruit at least
+  ``VISIBLE_SHARE`` visible and fruit partly hidden (a cut box is where a bias comes from: a
+  fit that takes a cut side for the silhouette makes the fruit smaller, and so nearer);
 * the trunk: horizontal distance between the estimated axis and the true one, every frame the
   trunk is found; and the share of frames it is found.
 """
@@ -28,6 +32,7 @@ from services.scene import Settings
 from services.scene.truth_tracks import TruthTracks
 
 FAILURE_FLAGS = ("box_invalid", "depth_invalid", "depth_inconsistent")
+VISIBLE_SHARE = 0.9  # a fruit at least this visible counts as whole for the bias split
 
 
 @dataclass
@@ -38,6 +43,8 @@ class SeedResult:
     centre_err_m: list[float] = field(default_factory=list)
     dv_err_m: list[float] = field(default_factory=list)
     dh_err_m: list[float] = field(default_factory=list)
+    # (signed range error m, signed d_h error m, visible fraction) per scored estimate
+    signed_m: list[tuple[float, float, float]] = field(default_factory=list)
     in_range_tracks: int = 0  # tracks given for fruit in range
     failed: int = 0  # of those, frames with no estimate (failure flag or not in the list)
     trunk_err_m: list[float] = field(default_factory=list)
@@ -122,6 +129,9 @@ def _score(
         res.centre_err_m.append(float(np.linalg.norm(np.asarray(est.position_world_m) - p_true)))
         res.dv_err_m.append(abs(est.semi_axis_v_m - ft.semi_axes_m[2]))
         res.dh_err_m.append(abs(est.semi_axis_h_m - ft.semi_axes_m[0]))
+        p_est = np.asarray(est.position_world_m)
+        range_err = float(np.linalg.norm(p_est - cam) - np.linalg.norm(p_true - cam))
+        res.signed_m.append((range_err, est.semi_axis_h_m - ft.semi_axes_m[0], ft.visible_fraction))
     t = state.trunk
     if t.found and t.position_world_m is not None:
         res.trunk_found += 1
@@ -158,6 +168,7 @@ def summary(results: list[SeedResult], settings: Settings, **meta: Any) -> dict[
         "dv_err_median_m": _q(dv, 50),
         "dv_err_p95_m": _q(dv, 95),
         "dh_err_median_m": _q(dh, 50),
+        **_biases([v for r in results for v in r.signed_m]),
         "trunk_err_m": _q(tr, 50),
         "trunk_err_p95_m": _q(tr, 95),
         "trunk_found_share": len(tr) / frames if frames else None,
@@ -178,6 +189,22 @@ def summary(results: list[SeedResult], settings: Settings, **meta: Any) -> dict[
             for r in results
         ],
     }
+
+
+def _biases(signed: list[tuple[float, float, float]]) -> dict[str, Any]:
+    """Mean signed errors, all fruit and split by visibility: ``range_bias*_m`` (estimate's
+    distance from the camera minus the truth's) and ``dh_bias*_m``, with the counts."""
+    out: dict[str, Any] = {}
+    for name, keep in (
+        ("", lambda v: True),
+        ("_visible", lambda v: v >= VISIBLE_SHARE),
+        ("_hidden", lambda v: v < VISIBLE_SHARE),
+    ):
+        rows = [(r, h) for r, h, v in signed if keep(v)]
+        out[f"range_bias{name}_m"] = float(np.mean([r for r, _ in rows])) if rows else None
+        out[f"dh_bias{name}_m"] = float(np.mean([h for _, h in rows])) if rows else None
+        out[f"fruit_estimates{name}"] = len(rows)
+    return out
 
 
 def _q(values: list[float], pct: float) -> float | None:

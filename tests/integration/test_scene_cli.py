@@ -36,11 +36,13 @@ def test_eval_scene_prints_the_goal_figures_as_json(tmp_path: Path) -> None:
     )
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)  # nothing else on stdout (pybullet's banner goes to stderr)
-    for key in ("center_err_median_m", "center_err_p95_m", "dv_err_median_m", "trunk_err_m"):
+    keys = ("center_err_median_m", "center_err_p95_m", "dv_err_median_m", "trunk_err_m")
+    for key in (*keys, "range_bias_m", "dh_bias_m"):
         assert isinstance(out[key], float), key
     assert out["seeds"] == [0, 1] and out["frames"] == 2 * 4
     assert out["fruit_estimates"] >= 2 * 4  # fruit 1 at least, every frame
     assert out["center_err_median_m"] < 0.01 and out["trunk_err_m"] < 0.02
+    assert abs(out["range_bias_m"]) < 0.01 and out["fruit_estimates_visible"] >= 4
 
 
 def test_eval_scene_refuses_bad_arguments(tmp_path: Path) -> None:
