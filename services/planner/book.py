@@ -114,6 +114,7 @@ class FruitRecord:
     spent_ns: int = 0  # sim time the tools spent on it, over every attempt
     deferred: bool = False  # blocked once: retried when nothing else is left
     cuts: int = 0
+    aim_deeper_m: float = 0.0  # the poses aim this far beyond ``planned`` (a retried cut)
     losses: int = 0
     frozen: bool = False  # cutting or leaving: the planning position no longer follows the scene
     planned_whole: bool = False  # ``planned`` comes from a whole view (no side cut, fresh)

@@ -45,7 +45,13 @@ from services.planner.clutter import blockers, clearable, same_fruit
 from services.planner.kinematics import Kinematics
 from services.planner.motion import ApproachPlanner
 from services.planner.order import nearest_first, planned_order
-from services.planner.poses import PoseSettings, ToolPoses, harvest_pose, pre_pose
+from services.planner.poses import (
+    FruitShape,
+    PoseSettings,
+    ToolPoses,
+    harvest_pose,
+    pre_pose,
+)
 from services.planner.retrace import JointPath, Retrace
 
 NS = 1_000_000_000
@@ -198,10 +204,20 @@ class Machine:
         poses = pre_pose if self.phase in ("approach", "leave") else harvest_pose
         return Goal(
             self.phase,
-            poses(rec.planned, self.pose_settings),
+            poses(self._aimed(rec), self.pose_settings),
             rec.fruit_id,
             self._ignore(rec if touching else None),
         )
+
+    def _aimed(self, rec: FruitRecord) -> FruitShape:
+        """What the poses aim at: the planned fruit, moved ``aim_deeper_m`` away from the
+        camera in the horizontal plane (a retried cut)."""
+        if rec.aim_deeper_m == 0.0:
+            return rec.planned
+        axis = self.pose_settings.camera_axis_world * np.array([1.0, 1.0, 0.0])
+        shift = rec.aim_deeper_m * axis / np.linalg.norm(axis)
+        p = rec.planned
+        return FruitShape(p.centre_world_m + shift, p.d_h_m, p.d_v_m)
 
     def _ignore(self, touching: FruitRecord | None) -> tuple[int, ...]:
         """Fruit IDs the controller need not avoid: the book's (the target's while the tools
@@ -395,6 +411,9 @@ class Machine:
         self.relook = False
         if rec.cuts < self.s.max_cut_attempts:
             why = f"cut {rec.cuts} failed (fruit still on its branch): retrying"
+            rec.aim_deeper_m = self.s.retry_aim_deeper_m
+            if rec.aim_deeper_m > 0.0:
+                why += f", {rec.aim_deeper_m * 1e3:.0f} mm deeper"
             self.events.append(Event("replanned", rec.fruit_id, reason=why))
             rec.frozen = False  # re-aim at the fruit as it is seen now
             self._enter(retry_from, now)
