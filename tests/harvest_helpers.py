@@ -46,6 +46,7 @@ class TruthScene:
     marks: dict[int, str] = field(default_factory=dict)
     stamper: Stamper = field(default_factory=lambda: Stamper("scene"))
     T_world_cam: np.ndarray = field(default_factory=head_camera_pose)
+    bias_world_m: tuple[float, float, float] = (0.0, 0.0, 0.0)  # added to every fruit's centre
     on_frame: Callable[[TruthScene, GroundTruth], None] | None = None
 
     def handle(self, topic: str, msg: Any) -> list[tuple[str, Any]]:
@@ -72,13 +73,13 @@ class TruthScene:
                 or tid in self.hidden
             ):
                 continue
-            p = np.array(ft.position_world_m)
+            p = np.array(ft.position_world_m) + np.array(self.bias_world_m)
             p_cam = R.T @ (p - t)
             seen.add(tid)
             self.entries[tid] = Fruit(
                 fruit_id=tid,
                 position_cam_m=tuple(float(v) for v in p_cam),  # type: ignore[arg-type]
-                position_world_m=ft.position_world_m,
+                position_world_m=tuple(float(v) for v in p),  # type: ignore[arg-type]
                 semi_axis_h_m=ft.semi_axes_m[0],
                 semi_axis_v_m=ft.semi_axes_m[2],
                 distance_m=float(np.linalg.norm(p_cam)),

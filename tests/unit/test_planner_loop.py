@@ -190,6 +190,32 @@ def test_a_failing_cut_is_retried_once_then_the_fruit_is_given_up(
     assert (s.cut_failed, s.harvested, s.dropped) == (1, 0, 0)
 
 
+@pytest.mark.parametrize("deeper_m", [0.0, 0.012])
+def test_a_retry_aimed_deeper_cuts_a_fruit_estimated_too_near(
+    tmp_path: Path, deeper_m: float
+) -> None:
+    # The scene puts the fruit 12 mm nearer the camera than it hangs, and the shears cut
+    # within 10 mm: the first cut closes short; a retry from the same estimate closes short
+    # again, one aimed 12 mm deeper cuts.
+    r = run_harvest(
+        lab_scenario(tmp_path, [A]),
+        sim={"cut_tolerance_m": 0.010},
+        planner={"retry_aim_deeper_m": deeper_m},
+        scene=TruthScene(bias_world_m=(-0.012, 0.0, 0.0)),
+        max_s=25,
+    )
+    check_loop_invariants(r)
+    cuts = [e.kind for e in r.by_topic.get("sim/events", []) if e.kind in ("cut", "cut_missed")]
+    retry = [e.reason for e in r.events("replanned") if "retrying" in e.reason]
+    s = r.summary()
+    if deeper_m:
+        assert cuts == ["cut_missed", "cut"] and retry[0].endswith("12 mm deeper")
+        assert (s.harvested, s.cut_failed) == (1, 0)
+    else:
+        assert cuts == ["cut_missed", "cut_missed"] and not retry[0].endswith("deeper")
+        assert (s.harvested, s.cut_failed) == (0, 1)
+
+
 def test_a_fruit_that_falls_beside_the_basket_is_reported_dropped(tmp_path: Path) -> None:
     # Fault injection: the controller receives the dish 20 cm to the side of where it belongs.
     def dish_aside(topic: str, msg: Any) -> Any:
