@@ -296,14 +296,14 @@ class Settings(ServiceSettings):
         default=2, ge=1, le=5, description="Cuts per fruit (the issue: retry once)."
     )
     retry_aim_deeper_m: float = Field(
-        default=0.0,
+        default=0.012,
         ge=0.0,
         le=0.03,
         description="A retried cut (the fruit still on its branch) aims this much farther from "
         "the camera, along its optical axis in the horizontal plane. A failed cut closes short: "
         "partly hidden fruit come out about 3 mm nearer than they are, the cutter stops within "
         "harvest_tolerance_m short of its pose, and a second cut from the same estimate closes "
-        "where the first did (BENCHMARKS.md, Harvest, session 27). 0: off, m.",
+        "where the first did. Orchard: BENCHMARKS.md, Harvest, session 27. 0: off, m.",
     )
     relook_before_retry: bool = Field(
         default=False,
