@@ -212,10 +212,11 @@ class Machine:
     def _aimed(self, rec: FruitRecord) -> FruitShape:
         """What the poses aim at: the planned fruit, moved ``aim_deeper_m`` away from the
         camera in the horizontal plane (a retried cut)."""
-        if rec.aim_deeper_m == 0.0:
-            return rec.planned
         axis = self.pose_settings.camera_axis_world * np.array([1.0, 1.0, 0.0])
-        shift = rec.aim_deeper_m * axis / np.linalg.norm(axis)
+        norm = float(np.linalg.norm(axis))
+        if rec.aim_deeper_m == 0.0 or norm < 1e-3:  # a camera looking straight down: no "deeper"
+            return rec.planned
+        shift = rec.aim_deeper_m * axis / norm
         p = rec.planned
         return FruitShape(p.centre_world_m + shift, p.d_h_m, p.d_v_m)
 
