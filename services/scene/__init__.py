@@ -78,8 +78,15 @@ class Settings(ServiceSettings):
         default=1.0,
         ge=0.5,
         le=2.0,
-        description="d_v/d_h assumed for a fruit with a cut box side until it was seen whole "
-        "(then its own measured ratio is used).",
+        description="d_v/d_h assumed for a fruit with a cut box side until it or "
+        "v_over_h_population_min_fruit other fruit were seen whole.",
+    )
+    v_over_h_population_min_fruit: int = Field(
+        default=3,
+        ge=0,
+        le=100,
+        description="A fruit with a cut box side never seen whole takes the median d_v/d_h of "
+        "the fruit seen whole in the list once there are at least this many (0: the prior).",
     )
     fruit_hsv_low: HsvTriple = Field(
         default=(0, 140, 50), description="Fruit colour, OpenCV HSV lower bound (inclusive)."
@@ -91,6 +98,11 @@ class Settings(ServiceSettings):
         default=True,
         description="Shrink each track's box to the fruit-coloured pixels at the fruit's depth "
         "inside it before measuring (a detector's boxes are a few pixels loose).",
+    )
+    refine_keeps_holes: bool = Field(
+        default=True,
+        description="The refined box keeps the box's fruit-coloured pixels that have no depth "
+        "(the stereo shadow of a nearer object); false: only pixels with depth count.",
     )
     min_colour_share: float = Field(
         default=0.15,

@@ -77,6 +77,7 @@ class FruitParams:
     fruit_hsv_high: tuple[int, int, int] = (30, 255, 255)
     min_colour_share: float = 0.15
     refine_box: bool = True
+    refine_keeps_holes: bool = True
 
 
 @dataclass(frozen=True)
@@ -183,6 +184,7 @@ class _Window:
     coloured: np.ndarray  # fruit-coloured and valid
     in_box: np.ndarray
     coloured_in_box: int
+    fruit_hue: np.ndarray  # fruit-coloured, with or without depth
 
     @classmethod
     def around(
@@ -203,11 +205,13 @@ class _Window:
         z = depth_m[r0:r1, c0:c1]
         valid = z > 0
         if hsv is None:
+            hue = np.zeros_like(valid)
             coloured = valid
         else:
             h = hsv[r0:r1, c0:c1]
             inside = (h >= np.array(p.fruit_hsv_low)) & (h <= np.array(p.fruit_hsv_high))
-            coloured = valid & np.all(inside, axis=2)
+            hue = np.all(inside, axis=2)
+            coloured = valid & hue
         in_box = (uu > x1) & (uu < x2) & (vv > y1) & (vv < y2)
         return cls(
             ((uu - K.cx) / K.fx).ravel(),
@@ -219,6 +223,7 @@ class _Window:
             coloured.ravel(),
             in_box.ravel(),
             int((coloured & in_box).sum()),
+            hue.ravel(),
         )
 
 
@@ -240,6 +245,11 @@ def _tight_box(box: Box, K: Pinhole, depth_m: np.ndarray, hsv: np.ndarray, p: Fr
     mine = pool & (win.z > z_front - 0.015) & (win.z < z_front + 1.5 * p.max_semi_axis_m)
     if int(mine.sum()) < p.min_pixels:
         return box
+    if p.refine_keeps_holes:
+        # Fruit-coloured pixels without depth are the fruit too: a nearer object to its right
+        # casts the stereo shadow over it (a band with no depth), and shrinking the box to the
+        # pixels with depth made the fruit narrow, and so near, with no side flagged as cut.
+        mine = mine | (win.in_box & ~win.valid & win.fruit_hue)
     u, v = win.u[mine], win.v[mine]
     x1, y1, x2, y2 = box
     tight = (

@@ -157,3 +157,31 @@ def test_a_loose_detector_box_is_shrunk_to_the_fruit() -> None:
     assert abs(est.semi_axis_h_m - 0.04) < 1.5e-3
     raw = run(s, box=loose, params=FruitParams(refine_box=False))
     assert isinstance(raw, FruitEstimate) and abs(raw.semi_axis_h_m - 0.04) > 4e-3
+
+
+@pytest.mark.parametrize("keeps_holes", [True, False])
+def test_the_stereo_shadow_of_a_nearer_object_does_not_shrink_the_fruit(keeps_holes) -> None:
+    # A nearer object just right of the fruit casts the D435's stereo shadow over the fruit's
+    # right part: fruit-coloured pixels with no depth. The detector's box still spans the fruit.
+    s = Scene()
+    centre = np.array([0.0, 0.0, 0.85])
+    s.ellipsoid(centre, a=0.043, c=0.041)
+    box = s.box()
+    x1, y1, x2, y2 = (round(v) for v in box)
+    s.plane_rect(0.45, x2 + 2, x2 + 80, y1 - 40, y2 + 40, colour=(40, 110, 40))
+    shadow_u = round((x1 + x2) / 2 + 4)  # the right 40 % of the fruit has no depth
+    est = run_with_holes(s, box, (slice(y1 - 40, y2 + 40), slice(shadow_u, x2 + 2)), keeps_holes)
+    assert isinstance(est, FruitEstimate), est
+    err_h = est.semi_axis_h_m - 0.043
+    if keeps_holes:
+        assert abs(err_h) < 1.5e-3 and np.linalg.norm(est.position_cam_m - centre) < 2e-3
+    else:  # the old refinement: the box shrank to the pixels with depth
+        assert err_h < -5e-3
+
+
+def run_with_holes(s: Scene, box, holes, keeps_holes: bool):
+    depth = s.depth_mm().astype(np.float64) / 1000
+    depth[holes] = 0.0
+    hsv = cv2.cvtColor(s.rgb, cv2.COLOR_RGB2HSV)
+    params = FruitParams(refine_keeps_holes=keeps_holes)
+    return estimate_fruit(box, depth, hsv, K, params, 0.95)
