@@ -88,6 +88,14 @@ class Settings(ServiceSettings):
         description="A fruit with a cut box side never seen whole takes the median d_v/d_h of "
         "the fruit seen whole in the list once there are at least this many (0: the prior).",
     )
+    misfit_tie_shape_tolerance: float = Field(
+        default=0.04,
+        ge=0,
+        le=1,
+        description="When two fits of a box (a side cut or not) contradict the image equally, "
+        "the one whose d_v/d_h is further than this share from the fruit's measured ratio "
+        "loses (0: off; the fewest cut sides win ties).",
+    )
     fruit_hsv_low: HsvTriple = Field(
         default=(0, 140, 50), description="Fruit colour, OpenCV HSV lower bound (inclusive)."
     )

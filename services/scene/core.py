@@ -83,6 +83,7 @@ class SceneCore:
             min_colour_share=s.min_colour_share,
             refine_box=s.refine_box,
             refine_keeps_holes=s.refine_keeps_holes,
+            shape_tolerance=s.misfit_tie_shape_tolerance,
         )
         self.trunk_params = TrunkParams(
             method=s.trunk_method,
@@ -261,8 +262,9 @@ class SceneCore:
             if not tr.matched:  # a coasting track's box is a prediction, not a detection
                 self.counters["track_coasting"] += 1
                 continue
+            v_over_h, shape_known = self._v_over_h(tr.track_id)
             est = estimate_fruit(
-                tr.xyxy_px, depth_m, hsv, K, self.fruit_params, self._v_over_h(tr.track_id)
+                tr.xyxy_px, depth_m, hsv, K, self.fruit_params, v_over_h, shape_known
             )
             if isinstance(est, EstimateFailure):
                 self.counters[f"fruit_{est.reason}"] += 1
@@ -347,17 +349,18 @@ class SceneCore:
             and not e.state.flags
         )
 
-    def _v_over_h(self, fid: int) -> float:
-        """d_v/d_h for a cut box: the fruit's own (median of its whole views), else the median
-        of the fruit seen whole in this scene (fruit of one tree share a shape: a fixed prior
-        of 1.0 made oblate oranges ~5 % too narrow and so too near), else the prior."""
+    def _v_over_h(self, fid: int) -> tuple[float, bool]:
+        """d_v/d_h for a cut box, and whether it was measured: the fruit's own (median of its
+        whole views), else the median of the fruit seen whole in this scene (fruit of one tree
+        share a shape: a fixed prior of 1.0 made oblate oranges ~6 % too narrow and so too
+        near), else the prior (not measured)."""
         r = self.ratios.get(fid)
         if r:
-            return float(np.median(r))
+            return float(np.median(r)), True
         need = self.s.v_over_h_population_min_fruit
         if need > 0 and len(self.ratios) >= need:
-            return float(np.median([np.median(v) for v in self.ratios.values()]))
-        return self.s.v_over_h_prior
+            return float(np.median([np.median(v) for v in self.ratios.values()])), True
+        return self.s.v_over_h_prior, False
 
     def _measure_trunk(
         self, frame: RgbdFrame, depth_m: np.ndarray, K: Pinhole, T: RigidTransform

@@ -78,6 +78,7 @@ class FruitParams:
     min_colour_share: float = 0.15
     refine_box: bool = True
     refine_keeps_holes: bool = True
+    shape_tolerance: float = 0.04
 
 
 @dataclass(frozen=True)
@@ -110,6 +111,7 @@ def estimate_fruit(
     K: Pinhole,
     p: FruitParams,
     v_over_h: float,
+    shape_measured: bool = False,
 ) -> FruitEstimate | EstimateFailure:
     """Centre (camera frame) and semi-axes of the fruit in ``box``.
 
@@ -120,6 +122,8 @@ def estimate_fruit(
         K: intrinsics of the frame.
         p: estimator settings.
         v_over_h: height/width ratio d_v/d_h to assume when a side is cut.
+        shape_measured: ``v_over_h`` was measured (this fruit's or its neighbours' whole
+            views), not a prior: a fit whose box gives a ratio far from it loses a misfit tie.
     """
     x1, y1, x2, y2 = box
     if not (x2 - x1 >= p.min_box_px and y2 - y1 >= p.min_box_px):
@@ -150,7 +154,7 @@ def estimate_fruit(
     suspects = [i for i in range(4) if occluded[i] and not border[i]]
     # A cut fruit goes on beyond its box: judge the fits on a wider window.
     wide = _Window.around(box, K, depth_m, hsv, p, p.window_margin) if suspects else win
-    fits: list[tuple[int, int, FruitEstimate]] = []
+    fits: list[tuple[int, int, int, FruitEstimate]] = []
     failure: EstimateFailure | None = None
     # An occluder-flagged side may be a real cut or a nearer neighbour that only touches the
     # fruit: fit every combination and keep the one that explains the image best.
@@ -164,11 +168,18 @@ def estimate_fruit(
             failure = failure or fit
             continue
         score = _misfit(shape, fit, wide) if suspects else 0
-        fits.append((score, len(cut_sides), fit))
+        odd = (
+            shape_measured
+            and p.shape_tolerance > 0
+            and abs(fit.v_over_h / v_over_h - 1) > p.shape_tolerance
+        )
+        fits.append((score, int(odd), len(cut_sides), fit))
     if not fits:
         assert failure is not None
         return failure
-    return min(fits, key=lambda f: (f[0], f[1]))[2]
+    # Ties: a box whose height/width is far from the fruit's known shape is not its silhouette
+    # (a side the image cannot tell cut from touched), then the fewest cut sides.
+    return min(fits, key=lambda f: f[:3])[3]
 
 
 @dataclass(frozen=True)

@@ -185,3 +185,26 @@ def run_with_holes(s: Scene, box, holes, keeps_holes: bool):
     hsv = cv2.cvtColor(s.rgb, cv2.COLOR_RGB2HSV)
     params = FruitParams(refine_keeps_holes=keeps_holes)
     return estimate_fruit(box, depth, hsv, K, params, 0.95)
+
+
+@pytest.mark.parametrize("measured", [True, False])
+def test_a_misfit_tie_goes_to_the_fit_of_the_fruits_measured_shape(measured, monkeypatch) -> None:
+    # A leaf hides the fruit's right 8 px. When the image cannot tell "cut" from "touched"
+    # (equal misfits; forced here), a box 4 % off the fruit's measured d_v/d_h is no silhouette.
+    import services.scene.fruit3d as f3
+
+    s = Scene()
+    centre = np.array([0.05, 0.0, 0.8])
+    s.ellipsoid(centre, a=0.04, c=0.0376)
+    _x1, y1, x2, y2 = (round(v) for v in s.box())
+    s.plane_rect(0.7, x2 - 7, x2 + 40, y1 - 30, y2 + 30, colour=(40, 110, 40))
+    monkeypatch.setattr(f3, "_misfit", lambda *a: 0)
+    depth = s.depth_mm().astype(np.float64) / 1000
+    hsv = cv2.cvtColor(s.rgb, cv2.COLOR_RGB2HSV)
+    est = estimate_fruit(s.box(1), depth, hsv, K, P, 0.94, measured)
+    assert isinstance(est, FruitEstimate), est
+    if measured:  # the cut fit, with the fruit's ratio: right
+        assert est.sides.good == (True, True, False, True)
+        assert abs(est.semi_axis_h_m - 0.04) < 1e-3
+    else:  # a prior only: the fewest cuts, the box as the silhouette (4 mm narrow)
+        assert est.sides.all_good and est.semi_axis_h_m < 0.0365
