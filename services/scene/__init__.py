@@ -96,6 +96,13 @@ class Settings(ServiceSettings):
         "the one whose d_v/d_h is further than this share from the fruit's measured ratio "
         "loses (0: off; the fewest cut sides win ties).",
     )
+    corner_fit: bool = Field(
+        default=False,
+        description="A box cut on a horizontal and a vertical side (a fruit hidden at a "
+        "corner): try sizes from the smallest that spans the box to 1.6 times it, tangent to "
+        "the two whole sides, and keep the one the image contradicts least (false: the box is "
+        "taken as the silhouette).",
+    )
     fruit_hsv_low: HsvTriple = Field(
         default=(0, 140, 50), description="Fruit colour, OpenCV HSV lower bound (inclusive)."
     )

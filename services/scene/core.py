@@ -84,6 +84,7 @@ class SceneCore:
             refine_box=s.refine_box,
             refine_keeps_holes=s.refine_keeps_holes,
             shape_tolerance=s.misfit_tie_shape_tolerance,
+            corner_fit=s.corner_fit,
         )
         self.trunk_params = TrunkParams(
             method=s.trunk_method,

@@ -79,6 +79,40 @@ def shape_from_sides(box: Box, K: Pinhole, good: tuple[bool, ...], v_over_h: flo
     return UnitShape(x, y, a, c)
 
 
+def corner_shapes(
+    box: Box, K: Pinhole, good: tuple[bool, ...], v_over_h: float, scales: tuple[float, ...]
+) -> list[UnitShape]:
+    """Unit-depth ellipsoids tangent to one whole horizontal and one whole vertical side of a
+    box cut on the other two (a fruit hidden at a corner), one per size in ``scales``.
+
+    Two sides leave the size open: each candidate is the smallest fruit that still spans the
+    box (its width, and its height through ``v_over_h``) times a scale; the caller keeps the
+    one that contradicts the image least. Empty unless exactly one side of each pair is good.
+    """
+    lg, tg, rg, bg = good
+    if lg == rg or tg == bg:
+        return []
+    x1, y1, x2, y2 = box
+    xl, xr = (x1 - K.cx) / K.fx, (x2 - K.cx) / K.fx
+    yt, yb = (y1 - K.cy) / K.fy, (y2 - K.cy) / K.fy
+    nl, nr = math.hypot(1, xl), math.hypot(1, xr)
+    a_width = (xr - xl) / (nl + nr)
+    c_height = (yb - yt) / (math.hypot(1, yt / v_over_h) + math.hypot(1, yb / v_over_h))
+    a0 = max(a_width, c_height / v_over_h)
+    out = []
+    for k in scales:
+        a = a0 * k
+        c = v_over_h * a
+        x = xl + a * nl if lg else xr - a * nr
+        y = (
+            yt + math.sqrt(c * c + a * a * yt * yt)
+            if tg
+            else yb - math.sqrt(c * c + a * a * yb * yb)
+        )
+        out.append(UnitShape(x, y, a, c))
+    return out
+
+
 def _c_from_top_bottom(yt: float, yb: float, a: float) -> float:
     """c with sqrt(c² + a²yt²) + sqrt(c² + a²yb²) = yb - yt (closed form)."""
     s, p2, q2 = yb - yt, (a * yt) ** 2, (a * yb) ** 2

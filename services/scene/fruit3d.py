@@ -42,11 +42,15 @@ from services.scene.ellipsoid import (
     Box,
     UnitShape,
     centre_depth,
+    corner_shapes,
     far_cluster,
     misfit,
     shape_from_sides,
 )
 from services.scene.geometry import Pinhole
+
+# Sizes tried for a fruit cut at a corner: 1 = the smallest that spans its box.
+CORNER_SCALES = tuple(float(k) for k in np.linspace(1.0, 1.6, 13))
 
 FailureReason = Literal[
     "box_degenerate",
@@ -79,6 +83,7 @@ class FruitParams:
     refine_box: bool = True
     refine_keeps_holes: bool = True
     shape_tolerance: float = 0.04
+    corner_fit: bool = False
 
 
 @dataclass(frozen=True)
@@ -162,12 +167,14 @@ def estimate_fruit(
         cut_sides = {s for s, c in zip(suspects, cut, strict=True) if c}
         good = tuple(not border[i] and i not in cut_sides for i in range(4))
         sides = Sides(good, border, occluded)  # type: ignore[arg-type]
-        shape = shape_from_sides(box, K, good, v_over_h)
-        fit = _fit(shape, sides, win, pool, p)
-        if isinstance(fit, EstimateFailure):
-            failure = failure or fit
+        corner = corner_shapes(box, K, good, v_over_h, CORNER_SCALES) if p.corner_fit else []
+        # Cut at a corner: the size the image contradicts least; else the one fit of the sides.
+        shapes = corner or [shape_from_sides(box, K, good, v_over_h)]
+        best = _best_fit(shapes, sides, win, wide, pool, p, judge=bool(suspects))
+        if isinstance(best, EstimateFailure):
+            failure = failure or best
             continue
-        score = _misfit(shape, fit, wide) if suspects else 0
+        score, fit = best
         odd = (
             shape_measured
             and p.shape_tolerance > 0
@@ -315,6 +322,33 @@ def _fit(
     if not (np.all(np.isfinite(centre)) and math.isfinite(d_v) and d_v > 0):
         return EstimateFailure("depth_inconsistent", "non-finite estimate")
     return FruitEstimate(centre, d_h, d_v, sides, sc.inliers)
+
+
+def _best_fit(
+    shapes: list[UnitShape],
+    sides: Sides,
+    win: _Window,
+    wide: _Window,
+    pool: np.ndarray,
+    p: FruitParams,
+    judge: bool,
+) -> tuple[int, FruitEstimate] | EstimateFailure:
+    """The candidate with the smallest misfit (the first, the smallest fruit, on a tie); the
+    misfit is 0 when ``judge`` is false (one candidate, nothing to choose)."""
+    best: tuple[int, FruitEstimate] | None = None
+    failure: EstimateFailure | None = None
+    for shape in shapes:
+        fit = _fit(shape, sides, win, pool, p)
+        if isinstance(fit, EstimateFailure):
+            failure = failure or fit
+            continue
+        score = _misfit(shape, fit, wide) if judge or len(shapes) > 1 else 0
+        if best is None or score < best[0]:
+            best = (score, fit)
+    if best is None:
+        assert failure is not None
+        return failure
+    return best
 
 
 def _misfit(shape: UnitShape, fit: FruitEstimate, win: _Window) -> int:

@@ -208,3 +208,24 @@ def test_a_misfit_tie_goes_to_the_fit_of_the_fruits_measured_shape(measured, mon
         assert abs(est.semi_axis_h_m - 0.04) < 1e-3
     else:  # a prior only: the fewest cuts, the box as the silhouette (4 mm narrow)
         assert est.sides.all_good and est.semi_axis_h_m < 0.0365
+
+
+@pytest.mark.parametrize("corner_fit", [True, False])
+def test_a_fruit_hidden_at_a_corner_is_sized_by_its_visible_outline(corner_fit) -> None:
+    # Leaves hide the fruit's right and bottom 10 px: no whole pair of sides is left.
+    s = Scene()
+    centre = np.array([0.05, 0.02, 0.8])
+    s.ellipsoid(centre, a=0.04, c=0.0376)
+    x1, y1, x2, y2 = (round(v) for v in s.box())
+    s.plane_rect(0.7, x2 - 10, x2 + 40, y1 - 40, y2 + 40, colour=(40, 110, 40))
+    s.plane_rect(0.7, x1 - 40, x2 + 40, y2 - 10, y2 + 40, colour=(40, 110, 40))
+    depth = s.depth_mm(2.0).astype(np.float64) / 1000
+    hsv = cv2.cvtColor(s.rgb, cv2.COLOR_RGB2HSV)
+    est = estimate_fruit(s.box(1), depth, hsv, K, FruitParams(corner_fit=corner_fit), 0.94, True)
+    assert isinstance(est, FruitEstimate), est
+    err_m = float(np.linalg.norm(est.position_cam_m - centre))
+    if corner_fit:  # tangent to the left and top sides, the size the image allows
+        assert est.sides.good == (True, True, False, False)
+        assert err_m < 2e-3 and abs(est.semi_axis_h_m - 0.04) < 1.5e-3
+    else:  # the cut box taken for the silhouette: 6 mm narrow, 10 mm off
+        assert err_m > 8e-3
