@@ -82,14 +82,14 @@ class Settings(ServiceSettings):
         "v_over_h_population_min_fruit other fruit were seen whole.",
     )
     v_over_h_population_min_fruit: int = Field(
-        default=0,
+        default=3,
         ge=0,
         le=100,
         description="A fruit with a cut box side never seen whole takes the median d_v/d_h of "
         "the fruit seen whole in the list once there are at least this many (0: the prior).",
     )
     misfit_tie_shape_tolerance: float = Field(
-        default=0.0,
+        default=0.04,
         ge=0,
         le=1,
         description="When two fits of a box (a side cut or not) contradict the image equally, "
@@ -115,7 +115,7 @@ class Settings(ServiceSettings):
         "inside it before measuring (a detector's boxes are a few pixels loose).",
     )
     refine_keeps_holes: bool = Field(
-        default=False,
+        default=True,
         description="The refined box keeps the box's fruit-coloured pixels that have no depth "
         "(the stereo shadow of a nearer object); false: only pixels with depth count.",
     )

@@ -81,8 +81,8 @@ class FruitParams:
     fruit_hsv_high: tuple[int, int, int] = (30, 255, 255)
     min_colour_share: float = 0.15
     refine_box: bool = True
-    refine_keeps_holes: bool = False
-    shape_tolerance: float = 0.0
+    refine_keeps_holes: bool = True
+    shape_tolerance: float = 0.04
     corner_fit: bool = False
 
 

@@ -201,7 +201,7 @@ def test_a_misfit_tie_goes_to_the_fit_of_the_fruits_measured_shape(measured, mon
     monkeypatch.setattr(f3, "_misfit", lambda *a: 0)
     depth = s.depth_mm().astype(np.float64) / 1000
     hsv = cv2.cvtColor(s.rgb, cv2.COLOR_RGB2HSV)
-    est = estimate_fruit(s.box(1), depth, hsv, K, FruitParams(shape_tolerance=0.04), 0.94, measured)
+    est = estimate_fruit(s.box(1), depth, hsv, K, P, 0.94, measured)
     assert isinstance(est, FruitEstimate), est
     if measured:  # the cut fit, with the fruit's ratio: right
         assert est.sides.good == (True, True, False, True)
