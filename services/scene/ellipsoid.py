@@ -49,34 +49,18 @@ def shape_from_sides(box: Box, K: Pinhole, good: tuple[bool, ...], v_over_h: flo
     from the other pair through ``v_over_h`` (c = v_over_h · a). With neither pair whole the
     box itself is taken as the silhouette (the caller flags it).
     """
-    x1, y1, x2, y2 = box
-    xl, xr = (x1 - K.cx) / K.fx, (x2 - K.cx) / K.fx
-    yt, yb = (y1 - K.cy) / K.fy, (y2 - K.cy) / K.fy
-    nl, nr = math.hypot(1, xl), math.hypot(1, xr)
+    r = _BoxRays.of(box, K)
     lg, tg, rg, bg = good
     h_pair, v_pair = lg and rg, tg and bg
     if not (h_pair or v_pair):
         h_pair = v_pair = lg = rg = tg = bg = True
     if h_pair:
-        a = (xr - xl) / (nl + nr)
-        c = _c_from_top_bottom(yt, yb, a) if v_pair else v_over_h * a
+        a = r.a_from_width()
+        c = _c_from_top_bottom(r.yt, r.yb, a) if v_pair else v_over_h * a
     else:
-        # Top and bottom with a = c / v_over_h: sqrt(c² + c²y²/ρ²) is linear in c.
-        c = (yb - yt) / (math.hypot(1, yt / v_over_h) + math.hypot(1, yb / v_over_h))
+        c = r.c_from_height(v_over_h)
         a = c / v_over_h
-    if lg:
-        x = xl + a * nl
-    elif rg:
-        x = xr - a * nr
-    else:
-        x = (xl + xr) / 2
-    if tg:
-        y = yt + math.sqrt(c * c + a * a * yt * yt)
-    elif bg:
-        y = yb - math.sqrt(c * c + a * a * yb * yb)
-    else:
-        y = (yt + yb) / 2
-    return UnitShape(x, y, a, c)
+    return r.placed(a, c, (lg, tg, rg, bg))
 
 
 def corner_shapes(
@@ -92,25 +76,58 @@ def corner_shapes(
     lg, tg, rg, bg = good
     if lg == rg or tg == bg:
         return []
-    x1, y1, x2, y2 = box
-    xl, xr = (x1 - K.cx) / K.fx, (x2 - K.cx) / K.fx
-    yt, yb = (y1 - K.cy) / K.fy, (y2 - K.cy) / K.fy
-    nl, nr = math.hypot(1, xl), math.hypot(1, xr)
-    a_width = (xr - xl) / (nl + nr)
-    c_height = (yb - yt) / (math.hypot(1, yt / v_over_h) + math.hypot(1, yb / v_over_h))
-    a0 = max(a_width, c_height / v_over_h)
-    out = []
-    for k in scales:
-        a = a0 * k
-        c = v_over_h * a
-        x = xl + a * nl if lg else xr - a * nr
-        y = (
-            yt + math.sqrt(c * c + a * a * yt * yt)
-            if tg
-            else yb - math.sqrt(c * c + a * a * yb * yb)
+    r = _BoxRays.of(box, K)
+    a0 = max(r.a_from_width(), r.c_from_height(v_over_h) / v_over_h)
+    return [r.placed(a, v_over_h * a, good) for a in (a0 * k for k in scales)]
+
+
+@dataclass(frozen=True)
+class _BoxRays:
+    """A box's sides as rays at unit depth (xl, xr, yt, yb) and the norms of the left and
+    right side planes' (1, x) parts."""
+
+    xl: float
+    xr: float
+    yt: float
+    yb: float
+    nl: float
+    nr: float
+
+    @classmethod
+    def of(cls, box: Box, K: Pinhole) -> _BoxRays:
+        x1, y1, x2, y2 = box
+        xl, xr = (x1 - K.cx) / K.fx, (x2 - K.cx) / K.fx
+        yt, yb = (y1 - K.cy) / K.fy, (y2 - K.cy) / K.fy
+        return cls(xl, xr, yt, yb, math.hypot(1, xl), math.hypot(1, xr))
+
+    def a_from_width(self) -> float:
+        """a tangent to the left and right sides."""
+        return (self.xr - self.xl) / (self.nl + self.nr)
+
+    def c_from_height(self, v_over_h: float) -> float:
+        """c tangent to the top and bottom with a = c / v_over_h: sqrt(c² + c²y²/ρ²) is
+        linear in c."""
+        return (self.yb - self.yt) / (
+            math.hypot(1, self.yt / v_over_h) + math.hypot(1, self.yb / v_over_h)
         )
-        out.append(UnitShape(x, y, a, c))
-    return out
+
+    def placed(self, a: float, c: float, good: tuple[bool, ...]) -> UnitShape:
+        """The shape of semi-axes (a, c) tangent to a good side of each pair (the left before
+        the right, the top before the bottom; centred between them when neither is good)."""
+        lg, tg, rg, bg = good
+        if lg:
+            x = self.xl + a * self.nl
+        elif rg:
+            x = self.xr - a * self.nr
+        else:
+            x = (self.xl + self.xr) / 2
+        if tg:
+            y = self.yt + math.sqrt(c * c + a * a * self.yt * self.yt)
+        elif bg:
+            y = self.yb - math.sqrt(c * c + a * a * self.yb * self.yb)
+        else:
+            y = (self.yt + self.yb) / 2
+        return UnitShape(x, y, a, c)
 
 
 def _c_from_top_bottom(yt: float, yb: float, a: float) -> float:
