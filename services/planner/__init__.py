@@ -244,7 +244,7 @@ class Settings(ServiceSettings):
         description="No path is planned to a goal that, moved clear as far as it goes, still "
         "lies deeper than this inside a branch or the trunk the scene shows: the dampers stop "
         "the arms short of it, in contact (paper-exp1 seed 9: a path to a goal 53 mm inside a "
-        "branch, 12 contacts; orchard seed 9: one 9 mm inside, 99 contacts); fruit, which "
+        "branch, 12 contacts; orchard seed 9: one 9 mm inside, 89 contacts); fruit, which "
         "swing aside, do not count, m. 0.02 was the default up to session 29.",
     )
     plan_trunk_margin_m: float = Field(

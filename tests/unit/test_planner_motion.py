@@ -248,7 +248,7 @@ def test_after_a_stall_the_approach_gets_a_planned_path() -> None:
 def test_no_path_to_a_goal_in_a_branch_but_one_in_a_fruit_is_planned_for() -> None:
     """plan_goal_max_depth_m: the dampers stop the arms short of a goal inside a branch, in
     contact (paper-exp1 seed 9: a path to a goal 53 mm inside one, then 12 contacts; orchard
-    seed 9: 9 mm inside, 99 contacts). A fruit swings aside. The depth allowed is a setting
+    seed 9: 9 mm inside, 89 contacts). A fruit swings aside. The depth allowed is a setting
     (0 by default; 2 cm, the branch check's depth, up to session 29)."""
     core = planned_core()
     s, rec = core.machine.s, core.book.records[1]
