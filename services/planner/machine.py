@@ -858,6 +858,10 @@ class Machine:
                 # Fruit hang still in view: a track the scene forgot before it was ever
                 # attempted was a fruit carried in the dish or falling, or a false detection.
                 r.outcome, r.reason = "lost", "left the scene before it was attempted"
+            elif not r.finished and r.deferred and r is not rec:
+                # Deferred (blocked or stalled), then hidden for longer than the run waits for
+                # a fruit it cannot see (hidden_wait_s): still to do, never retried.
+                r.reason = "deferred, then " + self._unseen_for(r, now) + ": never retried"
             if r.finished_ns is None and r.finished:
                 r.finished_ns = now
         self.target = None
@@ -865,6 +869,12 @@ class Machine:
         self.events.append(Event("run_finished", reason=why))
         self.phase = "done"
         self.finished = True
+
+    @staticmethod
+    def _unseen_for(r: FruitRecord, now: int) -> str:
+        if r.last_seen_ns is None:
+            return "never seen"
+        return f"not seen for {(now - r.last_seen_ns) / NS:.0f} s"
 
     def _check_stuck(self, now: int, timeout_s: float, leave: bool) -> None:
         rec = self.target

@@ -73,6 +73,23 @@ def test_a_track_forgotten_before_any_attempt_ends_lost_one_in_view_pending() ->
     assert recs[2].outcome == "lost" and "before it was attempted" in recs[2].reason
 
 
+def test_a_deferred_fruit_hidden_at_the_end_says_why_it_is_still_pending() -> None:
+    """Orchard seed 14: two fruit deferred after a stall, then hidden from the ready pose for
+    longer than hidden_wait_s; the run ended with them 'pending' and no reason."""
+    from tests.unit.test_planner_select import core_with
+    from tests.unit.test_planner_select import fruit as seen_fruit
+
+    core = core_with(
+        "nearest", seen_fruit(1, (0.6, 0.0, 1.3), 0.5), seen_fruit(2, (0.6, 0.2, 1.3), 0.6)
+    )
+    recs = core.book.records
+    recs[1].deferred, recs[1].started_ns, recs[1].last_seen_ns = True, 2 * S, 3 * S
+    core.machine._end_run(30 * S, "no reachable fruit left")
+    assert recs[1].outcome is None  # still to do: pending in the summary ...
+    assert recs[1].reason == "deferred, then not seen for 27 s: never retried"  # ... with why
+    assert recs[2].reason == ""  # never deferred: nothing to add
+
+
 def test_a_forgotten_second_track_of_a_listed_fruit_is_not_another_fruit() -> None:
     done = record(1, (0.6, 0.0, 1.3), outcome="harvested", started_ns=S, spent_ns=3 * S)
     gone = record(
