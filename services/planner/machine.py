@@ -272,7 +272,7 @@ class Machine:
         if near and self.progress.stuck(now, self.s.settle_s):
             self._enter("harvest", now)
             return
-        self._check_stuck(now, self.s.approach_timeout_s, leave=False)
+        self._check_stuck(now, self.s.approach_timeout_s, leave=False, st=st)
 
     def _follow(self, now: int) -> None:
         """Along the planned path; at its end the pose goals take over with the approach's
@@ -361,7 +361,7 @@ class Machine:
             err_mm = st.abs_position_error_m * 1e3
             self._send_cut(rec, now, basket, f" (held {err_mm:.0f} mm short of the pose)")
             return
-        self._check_stuck(now, self.s.harvest_timeout_s, leave=True)
+        self._check_stuck(now, self.s.harvest_timeout_s, leave=True, st=st)
 
     def _send_cut(self, rec: FruitRecord, now: int, basket: int | None, note: str = "") -> None:
         """Close the shears on ``rec`` (``note``: what the cut_sent reason adds)."""
@@ -870,13 +870,26 @@ class Machine:
         self.phase = "done"
         self.finished = True
 
+    def _now_off(self, st: ControlStatus | None) -> str:
+        """Where each tool is at the stall, when the status is of this phase's targets: the
+        best task error (cutter + dish) alone hides which tool is held (orchard seed 2: best
+        9 mm, then the dish held 57 mm short by a neighbour, the cutter on its pose)."""
+        if st is None or st.target_seq is None or st.target_seq < self.progress.first_target_seq:
+            return ""
+        if st.reason:
+            return ""
+        cutter, dish = st.abs_position_error_m * 1e3, st.rel_position_error_m * 1e3
+        return f"; now the cutter {cutter:.0f} mm, the dish {dish:.0f} mm off"
+
     @staticmethod
     def _unseen_for(r: FruitRecord, now: int) -> str:
         if r.last_seen_ns is None:
             return "never seen"
         return f"not seen for {(now - r.last_seen_ns) / NS:.0f} s"
 
-    def _check_stuck(self, now: int, timeout_s: float, leave: bool) -> None:
+    def _check_stuck(
+        self, now: int, timeout_s: float, leave: bool, st: ControlStatus | None = None
+    ) -> None:
         rec = self.target
         assert rec is not None
         over = now - self.progress.since_ns > timeout_s * NS
@@ -885,7 +898,7 @@ class Machine:
             return
         err = self.progress.best_m
         what = f"timed out after {timeout_s:.1f} s" if over else "no progress"
-        detail = f"{self.phase} {what} (best task error {err * 1e3:.0f} mm)"
+        detail = f"{self.phase} {what} (best task error {err * 1e3:.0f} mm{self._now_off(st)})"
         if self.phase == "approach" and self._plan_after_stall(rec, now, detail):
             return
         back = None

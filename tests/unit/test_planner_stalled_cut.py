@@ -45,3 +45,10 @@ def test_a_zero_tolerance_turns_the_stalled_cut_off() -> None:
     core, _ = drive(0.009, stalled_cut_tolerance_m=0.0)
     assert core.book.records[1].cuts == 0
     assert any("harvest no progress" in e.reason for e in core.machine.events)
+
+
+def test_the_stall_says_where_each_tool_is_held() -> None:
+    """The best task error (cutter + dish) alone hides which tool a neighbour holds back."""
+    core, _ = drive(0.03)
+    why = [e.reason for e in core.machine.events if "harvest no progress" in e.reason]
+    assert why and "now the cutter 30 mm, the dish 0 mm off)" in why[0]
