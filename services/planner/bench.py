@@ -256,23 +256,32 @@ class Truth:
     reachable: dict[int, bool]
     why: dict[int, str]
     reachable_ik: dict[int, bool] = field(default_factory=dict)
+    # clear of the tree, but every such IK solution of its harvest pose or of its pre-pose
+    # touches another fruit hanging at the start: reached only by pushing a neighbour aside
+    # or after it is harvested (a diagnosis of the losses, not part of ``reachable``)
+    crowded: dict[int, bool] = field(default_factory=dict)
 
 
 # The robot (all joints, arm order) would touch a tree body: the sim's own collision test.
 TouchesTree = Callable[[np.ndarray], bool]
+# ... would touch a fruit other than the given sim fruit.
+TouchesFruit = Callable[[np.ndarray, int], bool]
 
 
 def truth_reachability(
     truth: GroundTruth,
     planner_settings: dict[str, Any],
     touches_tree: TouchesTree | None = None,
+    touches_fruit: TouchesFruit | None = None,
 ) -> Truth:
     """A fruit is reachable when the IK reaches its harvest pose and pre-pose (true centre and
     semi-axes), some IK solution of each (the planner's sampled cutter yaws) keeps the robot off
     the trunk and branches (``touches_tree``: the sim's collision model; a dish or cutter
     that can only be put through a branch harvests with a collision), and there is an order in
     which every fruit in its tools' way is harvested before it (``clutter.blockers`` with the
-    planner's clearance; fixpoint from the free ones)."""
+    planner's clearance; fixpoint from the free ones). ``touches_fruit`` (optional) marks the
+    fruit clear of the tree whose every tree-free IK solution of a pose touches a neighbour:
+    ``crowded``."""
     from services.planner import SERVICE as PLAN
     from services.planner import Settings as PlannerSettings
     from services.planner.core import PlannerCore
@@ -290,6 +299,7 @@ def truth_reachability(
     why: dict[int, str] = {}
     ik_ok: set[int] = set()
     tree_ok: set[int] = set()
+    crowded: dict[int, bool] = {}
     for i, shape in shapes.items():
         # the IK solutions at every sampled yaw: none for a pose is the IK's "out of reach"
         sols = [
@@ -300,10 +310,12 @@ def truth_reachability(
             why[i] = "IK"
             continue
         ik_ok.add(i)
-        if touches_tree is None or all(
-            any(not touches_tree(s.q_rad) for s in pose_sols) for pose_sols in sols
-        ):
+        free = [[s for s in p if touches_tree is None or not touches_tree(s.q_rad)] for p in sols]
+        if all(free):
             tree_ok.add(i)
+            crowded[i] = touches_fruit is not None and any(
+                all(touches_fruit(s.q_rad, i) for s in p) for p in free
+            )
         else:
             why[i] = "branch"
     clear_ik = _clear_order(ik_ok, shapes, ps, settings.neighbour_clearance_m)
@@ -314,6 +326,7 @@ def truth_reachability(
         {i: i in clear for i in sorted(shapes)},
         why,
         {i: i in clear_ik for i in sorted(shapes)},
+        {i: crowded.get(i, False) for i in sorted(shapes)},
     )
 
 
@@ -552,6 +565,8 @@ def evaluate(got: Collected, first_truth: GroundTruth, judged: Truth) -> dict[st
         "unreachable_reported": len(reported_unreachable),
         "unreachable_correct": len(reported_unreachable & set(unreachable)),
         "reachable_called_unreachable": len(reported_unreachable - set(unreachable)),
+        "reachable_crowded": sum(1 for i in reachable if judged.crowded.get(i)),
+        "lost_crowded": sum(1 for i in reachable if judged.crowded.get(i) and i not in collected),
         "dropped": sum(1 for e in got.sim_events if e.kind == "dropped"),
         **_contacts(got, centres),
         "contact_ticks": counters.contact_ticks if counters is not None else None,
@@ -660,7 +675,12 @@ def first_frame(sim_s: dict[str, Any], plan_s: dict[str, Any]) -> tuple[GroundTr
         (group, *_rest) = sim.emit()
         truth = next(m for t, m in group if t == "sim/truth")
         physics = sim.physics
-        return truth, truth_reachability(truth, plan_s, lambda q: bool(physics.tree_contacts_at(q)))
+        return truth, truth_reachability(
+            truth,
+            plan_s,
+            lambda q: bool(physics.tree_contacts_at(q)),
+            lambda q, i: bool(physics.fruit_contacts_at(q, i)),
+        )
     finally:
         sim.close()
 
@@ -686,6 +706,8 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "unreachable_reported",
             "unreachable_correct",
             "reachable_called_unreachable",
+            "reachable_crowded",
+            "lost_crowded",
             "dropped",
             "collisions",
             "target_contacts",
@@ -733,6 +755,8 @@ def table(result: dict[str, Any]) -> str:
         ("harvested_reachable_ik", "harvested of the reachable without the branch check"),
         ("reachable_ik", "reachable without the branch check"),
         ("reachable_called_unreachable", "reachable called unreachable"),
+        ("reachable_crowded", "reachable only past a neighbour"),
+        ("lost_crowded", "  of which not harvested"),
         ("dropped", "dropped"),
         ("collisions", "collisions (robot contacts, target excluded)"),
         ("target_contacts", "contacts with the fruit being harvested"),

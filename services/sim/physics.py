@@ -10,6 +10,7 @@ LWR's own position loop tracks to well under a millimetre).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 
 import numpy as np
 
@@ -186,13 +187,21 @@ class Physics:
         (all_joint_names order, rad): the contacts the sim would count there, for judging a
         posture (the bench's truth). The joints are reset to ``q`` at rest: use it on a sim that
         is not stepping, or set the robot again before the next step."""
+        return self._contacts_at(q, self.tree_bodies)
+
+    def fruit_contacts_at(self, q: np.ndarray, but: int | None = None) -> list[tuple[str, str]]:
+        """(robot link, fruit body) pairs that would touch with the joints at ``q``, fruit
+        ``but`` (the one being harvested) left out; as ``tree_contacts_at``."""
+        return self._contacts_at(q, [b for i, b in self.fruit_body.items() if i != but])
+
+    def _contacts_at(self, q: np.ndarray, bodies: Iterable[int]) -> list[tuple[str, str]]:
         pb, c = self.pb, self.cid
         for j, a in zip(self.joint_ids, q, strict=True):
             pb.resetJointState(self.robot, j, float(a), 0.0, physicsClientId=c)
         hull = self.link[BASKET_HULL]  # collides with nothing (see __init__)
         pairs = {
             (self.link_name[cp[3]], self.names[body])
-            for body in self.tree_bodies
+            for body in bodies
             for cp in pb.getClosestPoints(self.robot, body, TOUCH_M, physicsClientId=c)
             if cp[3] != hull
         }

@@ -64,3 +64,41 @@ def test_both_judgements_are_totalled() -> None:
     assert agg["success_rate"] == 0.5 and agg["success_rate_ik"] == 0.75
     text = bench.table({"scenario": "x", "seeds": [0], "mode": "inproc", "policies": {"n": agg}})
     assert "reachable without the branch check" in text
+
+
+def test_fruit_contacts_at_a_posture_leave_the_target_out(tmp_path: Path) -> None:
+    probe = Physics(build_world(load_scenario(str(lab_scenario(tmp_path, [A])))), 1 / 60, 1)
+    try:
+        assert probe.fruit_contacts_at(home_q()) == []  # fruit 0 hangs clear of the arms
+        tip, _R = probe.frame("cutter_tool")  # where the joints were just put
+    finally:
+        probe.close()
+    there = {**A, "position_world_m": [float(v) for v in tip]}
+    at_tip = lab_scenario(tmp_path, [A, there])  # a second fruit at the cutter's tip
+    hit = Physics(build_world(load_scenario(str(at_tip))), 1 / 60, 1)
+    try:
+        assert ("cutter_tool", "fruit_1") in hit.fruit_contacts_at(home_q())
+        assert ("cutter_tool", "fruit_1") not in hit.fruit_contacts_at(home_q(), but=1)
+        assert hit.tree_contacts_at(home_q()) == []  # fruit are no tree bodies
+    finally:
+        hit.close()
+
+
+def test_crowded_fruit_are_told_apart_and_totalled() -> None:
+    """Orchard seeds 0-14 and 16 (session 30): 18 of the 19 reachable fruit not harvested
+    could only be reached with a robot body against a neighbour fruit (37 of the 64 harvested)."""
+    from services.planner import bench
+
+    truth, _ = first_frame(
+        {"scenario": "orchard", "seed": 2}, {"order": "nearest", "scenario": "orchard", "seed": 2}
+    )
+    plan_s = {"order": "nearest", "scenario": "orchard", "seed": 2}
+    never = bench.truth_reachability(truth, plan_s, lambda q: False, lambda q, i: False)
+    always = bench.truth_reachability(truth, plan_s, lambda q: False, lambda q, i: True)
+    assert never.reachable == always.reachable  # a diagnosis, not part of reachable
+    reach = [i for i, ok in always.reachable.items() if ok]
+    assert reach and all(always.crowded[i] for i in reach)
+    assert not any(never.crowded.values())
+    row = {"cycles_s": [], "sim_s": 1.0, "wall_s": 1.0, "max_velocity_ratio": 0.5}
+    row |= {"reachable_fates": {}, "reachable": 2, "reachable_crowded": 2, "lost_crowded": 1}
+    assert bench.aggregate([row, row])["lost_crowded"] == 2
