@@ -85,8 +85,8 @@ def test_fruit_contacts_at_a_posture_leave_the_target_out(tmp_path: Path) -> Non
 
 
 def test_crowded_fruit_are_told_apart_and_totalled() -> None:
-    """Orchard seeds 0-14 and 16 (session 30): 18 of the 19 reachable fruit not harvested
-    could only be reached with a robot body against a neighbour fruit (37 of the 64 harvested)."""
+    """Orchard seeds 0-19 (session 30): 22 of the 25 reachable fruit not harvested could only
+    be reached with a robot body against a neighbour fruit (43 of the 76 harvested)."""
     from services.planner import bench
 
     truth, _ = first_frame(
