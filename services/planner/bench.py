@@ -299,7 +299,7 @@ def truth_reachability(
     why: dict[int, str] = {}
     ik_ok: set[int] = set()
     tree_ok: set[int] = set()
-    crowded: dict[int, bool] = {}
+    crowded: set[int] = set()
     for i, shape in shapes.items():
         # the IK solutions at every sampled yaw: none for a pose is the IK's "out of reach"
         sols = [
@@ -313,9 +313,10 @@ def truth_reachability(
         free = [[s for s in p if touches_tree is None or not touches_tree(s.q_rad)] for p in sols]
         if all(free):
             tree_ok.add(i)
-            crowded[i] = touches_fruit is not None and any(
+            if touches_fruit is not None and any(
                 all(touches_fruit(s.q_rad, i) for s in p) for p in free
-            )
+            ):
+                crowded.add(i)
         else:
             why[i] = "branch"
     clear_ik = _clear_order(ik_ok, shapes, ps, settings.neighbour_clearance_m)
@@ -326,7 +327,7 @@ def truth_reachability(
         {i: i in clear for i in sorted(shapes)},
         why,
         {i: i in clear_ik for i in sorted(shapes)},
-        {i: crowded.get(i, False) for i in sorted(shapes)},
+        {i: i in crowded for i in sorted(shapes)},
     )
 
 

@@ -110,8 +110,13 @@ class Progress:
     best_m: float = float("inf")
     best_ns: int = 0
 
+    def counts(self, st: ControlStatus) -> bool:
+        """The status is of this phase's targets and not holding: its errors are the phase's."""
+        seq = st.target_seq
+        return seq is not None and seq >= self.first_target_seq and not st.reason
+
     def note(self, st: ControlStatus, now_ns: int, min_gain_m: float) -> None:
-        if st.target_seq is None or st.target_seq < self.first_target_seq or st.reason:
+        if not self.counts(st):
             return
         err = st.abs_position_error_m + st.rel_position_error_m
         if err < self.best_m - min_gain_m:
@@ -874,9 +879,7 @@ class Machine:
         """Where each tool is at the stall, when the status is of this phase's targets: the
         best task error (cutter + dish) alone hides which tool is held (orchard seed 2: best
         9 mm, then the dish held 57 mm short by a neighbour, the cutter on its pose)."""
-        if st is None or st.target_seq is None or st.target_seq < self.progress.first_target_seq:
-            return ""
-        if st.reason:
+        if st is None or not self.progress.counts(st):
             return ""
         cutter, dish = st.abs_position_error_m * 1e3, st.rel_position_error_m * 1e3
         return f"; now the cutter {cutter:.0f} mm, the dish {dish:.0f} mm off"
@@ -938,7 +941,7 @@ class Machine:
         """The status is of this phase's targets, not holding, and within tolerance (the
         cutter's ``tol_m``; the dish's ``rel_tol_m``, default relative_tolerance_m; orientations;
         ``loose``: the cutter's position only)."""
-        if st.target_seq is None or st.target_seq < self.progress.first_target_seq or st.reason:
+        if not self.progress.counts(st):
             return False
         if st.abs_position_error_m > tol_m:
             return False
