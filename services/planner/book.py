@@ -102,6 +102,7 @@ class FruitRecord:
     fruit_id: int  # current track ID
     ids: list[int]
     seen: Fruit  # latest scene entry
+    viewed: Fruit | None = None  # latest entry from a view of this frame that failed not
     planned: FruitShape  # the position and size the poses are computed from
     in_scene: bool = True
     in_basket: bool = False
@@ -265,6 +266,8 @@ class FruitBook:
 
     def _observe(self, rec: FruitRecord, f: Fruit, in_dish: InDish) -> None:
         rec.seen = f
+        if _this_frames(f):
+            rec.viewed = f
         if rec.finished or rec.frozen:
             return
         if f.frames_unseen == 0 and in_dish(f) and rec.key != self.hanging_key:

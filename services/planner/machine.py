@@ -955,9 +955,16 @@ class Machine:
         )
 
     def _still_attached(self, rec: FruitRecord, cut: CutState) -> bool:
-        """Seen after the cut (once a cut fruit would have fallen) where it was cut."""
-        f = rec.seen
-        if not rec.in_scene or f.last_seen_stamp_ns < cut.stamp_ns + self.s.seen_after_cut_s * NS:
+        """Seen after the cut (once a cut fruit would have fallen) where it was cut. Only a view
+        that gave an estimate counts: one the scene kept its stored estimate for (no consistent
+        depth, a jump) shows the track, not where the fruit is (orchard seed 18: a cut fruit
+        bouncing in our dish read depth_inconsistent for 3 s, kept where it hung; the cut was
+        called failed, the second closed on nothing, and the fruit, given up as still on its
+        branch, stood in the tools' way of two others for the rest of the run)."""
+        f = rec.viewed
+        if not rec.in_scene or f is None:
+            return False
+        if f.last_seen_stamp_ns < cut.stamp_ns + self.s.seen_after_cut_s * NS:
             return False
         p = np.array(f.position_world_m, float)
         return bool(np.linalg.norm(p - cut.centre_world_m) <= self.s.attached_tolerance_m)
