@@ -102,8 +102,8 @@ class FruitRecord:
     fruit_id: int  # current track ID
     ids: list[int]
     seen: Fruit  # latest scene entry
-    viewed: Fruit | None = None  # latest entry from a view of this frame that failed not
     planned: FruitShape  # the position and size the poses are computed from
+    viewed: Fruit | None = None  # latest entry from a view of this frame that failed not
     in_scene: bool = True
     in_basket: bool = False
     outcome: FruitOutcome | None = None  # None: still to do
