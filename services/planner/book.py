@@ -103,7 +103,7 @@ class FruitRecord:
     ids: list[int]
     seen: Fruit  # latest scene entry
     planned: FruitShape  # the position and size the poses are computed from
-    viewed: Fruit | None = None  # latest entry from a view of this frame that failed not
+    viewed: Fruit | None = None  # latest entry the scene estimated from a view of this frame
     in_scene: bool = True
     in_basket: bool = False
     outcome: FruitOutcome | None = None  # None: still to do
@@ -266,7 +266,7 @@ class FruitBook:
 
     def _observe(self, rec: FruitRecord, f: Fruit, in_dish: InDish) -> None:
         rec.seen = f
-        if _this_frames(f):
+        if f.frames_unseen == 0 and "kept" not in f.flags:
             rec.viewed = f
         if rec.finished or rec.frozen:
             return

@@ -394,7 +394,7 @@ class Machine:
             return
         if now - cut.stamp_ns < self.s.collect_timeout_s * NS:
             return
-        if self._still_attached(rec, cut):
+        if self._still_attached(rec, cut, None):
             if self._relook_wanted(rec):
                 self.verify = cut
                 self._start_relook(rec, "still on its branch")
@@ -493,7 +493,7 @@ class Machine:
         if self.relook:
             self._relooking(now, st, rec)
             return
-        if self._still_attached(rec, cut):
+        if self._still_attached(rec, cut, self.arrived_ns):
             if self._relook_wanted(rec):
                 self._start_relook(rec, "seen on its branch again")
                 self._relooking(now, st, rec)
@@ -954,20 +954,31 @@ class Machine:
             and st.rel_orientation_error_rad <= self.s.orientation_tolerance_rad
         )
 
-    def _still_attached(self, rec: FruitRecord, cut: CutState) -> bool:
-        """Seen after the cut (once a cut fruit would have fallen) where it was cut. Only a view
-        that gave an estimate counts: one the scene kept its stored estimate for (no consistent
-        depth, a jump) shows the track, not where the fruit is (orchard seed 18: a cut fruit
-        bouncing in our dish read depth_inconsistent for 3 s, kept where it hung; the cut was
-        called failed, the second closed on nothing, and the fruit, given up as still on its
-        branch, stood in the tools' way of two others for the rest of the run)."""
-        f = rec.viewed
-        if not rec.in_scene or f is None:
+    def _still_attached(self, rec: FruitRecord, cut: CutState, at_ready_ns: int | None) -> bool:
+        """Seen after the cut (once a cut fruit would have fallen) where it was cut.
+
+        While the tools are at the fruit, only a view the scene estimated from counts: one it
+        kept its stored estimate for shows the track, not where the fruit is (orchard seed 18:
+        a cut fruit bouncing in our dish read depth_inconsistent for 3 s, kept where it hung;
+        the cut was called failed, the second closed on nothing, and the fruit, given up as
+        still on its branch, stood in the tools' way of two others for the rest of the run).
+        From the ready pose (since ``at_ready_ns``; our dish is away from the tree) a detection
+        at its place counts too, estimated or kept for want of depth, but not one kept for a
+        jump: the track on something elsewhere (orchard seed 2: a fruit behind leaves read
+        depth_inconsistent from everywhere; a missed cut on it was taken for a drop)."""
+        if not rec.in_scene:
             return False
-        if f.last_seen_stamp_ns < cut.stamp_ns + self.s.seen_after_cut_s * NS:
-            return False
-        p = np.array(f.position_world_m, float)
-        return bool(np.linalg.norm(p - cut.centre_world_m) <= self.s.attached_tolerance_m)
+        views = [(rec.viewed, cut.stamp_ns + round(self.s.seen_after_cut_s * NS))]
+        f = rec.seen
+        if at_ready_ns is not None and f.frames_unseen == 0 and "position_jump" not in f.flags:
+            views.append((f, at_ready_ns))
+        return any(
+            v is not None
+            and v.last_seen_stamp_ns >= since
+            and np.linalg.norm(np.array(v.position_world_m, float) - cut.centre_world_m)
+            <= self.s.attached_tolerance_m
+            for v, since in views
+        )
 
     def _note_switches_and_moves(self) -> None:
         rec = self.target
