@@ -965,7 +965,8 @@ class Machine:
         From the ready pose (since ``at_ready_ns``; our dish is away from the tree) a detection
         at its place counts too, estimated or kept for want of depth, but not one kept for a
         jump: the track on something elsewhere (orchard seed 2: a fruit behind leaves read
-        depth_inconsistent from everywhere; a missed cut on it was taken for a drop)."""
+        depth_inconsistent from everywhere: on estimated views alone, a missed cut on it was
+        taken for a drop)."""
         if not rec.in_scene:
             return False
         views = [(rec.viewed, cut.stamp_ns + round(self.s.seen_after_cut_s * NS))]
