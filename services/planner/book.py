@@ -266,7 +266,7 @@ class FruitBook:
 
     def _observe(self, rec: FruitRecord, f: Fruit, in_dish: InDish) -> None:
         rec.seen = f
-        if f.frames_unseen == 0 and "kept" not in f.flags:
+        if _estimated(f):
             rec.viewed = f
         if rec.finished or rec.frozen:
             return
@@ -441,6 +441,12 @@ def _this_frames(f: Fruit) -> bool:
     none kept for want of depth or for a jump. A cut view may have left the stored estimate in
     place (``kept``; ``CUT_FLAGS``)."""
     return f.frames_unseen == 0 and set(f.flags) <= CUT_FLAGS
+
+
+def _estimated(f: Fruit) -> bool:
+    """The scene's estimate comes from this frame's view (whole or cut on a side), not kept
+    from before (no consistent depth, a jump, a side cut it would not take)."""
+    return f.frames_unseen == 0 and "kept" not in f.flags
 
 
 def _whole_for(rec: FruitRecord, f: Fruit) -> bool:

@@ -38,6 +38,7 @@ import numpy as np
 
 from schemas.control import ControlStatus, HarvestPhase
 from schemas.harvest import FruitOutcome, HarvestEventKind
+from schemas.scene import Fruit
 from services.planner import Settings
 from services.planner.book import FruitBook, FruitRecord
 from services.planner.branchcheck import BranchCheck
@@ -875,11 +876,11 @@ class Machine:
         self.phase = "done"
         self.finished = True
 
-    def _now_off(self, st: ControlStatus | None) -> str:
+    def _now_off(self, st: ControlStatus) -> str:
         """Where each tool is at the stall, when the status is of this phase's targets: the
         best task error (cutter + dish) alone hides which tool is held (orchard seed 2: best
         9 mm, then the dish held 57 mm short by a neighbour, the cutter on its pose)."""
-        if st is None or not self.progress.counts(st):
+        if not self.progress.counts(st):
             return ""
         cutter, dish = st.abs_position_error_m * 1e3, st.rel_position_error_m * 1e3
         return f"; now the cutter {cutter:.0f} mm, the dish {dish:.0f} mm off"
@@ -890,9 +891,7 @@ class Machine:
             return "never seen"
         return f"not seen for {(now - r.last_seen_ns) / NS:.0f} s"
 
-    def _check_stuck(
-        self, now: int, timeout_s: float, leave: bool, st: ControlStatus | None = None
-    ) -> None:
+    def _check_stuck(self, now: int, timeout_s: float, leave: bool, st: ControlStatus) -> None:
         rec = self.target
         assert rec is not None
         over = now - self.progress.since_ns > timeout_s * NS
@@ -969,17 +968,19 @@ class Machine:
         taken for a drop)."""
         if not rec.in_scene:
             return False
-        views = [(rec.viewed, cut.stamp_ns + round(self.s.seen_after_cut_s * NS))]
+        after_cut_ns = cut.stamp_ns + round(self.s.seen_after_cut_s * NS)
+        if self._at_cut(rec.viewed, after_cut_ns, cut):
+            return True
         f = rec.seen
-        if at_ready_ns is not None and f.frames_unseen == 0 and "position_jump" not in f.flags:
-            views.append((f, at_ready_ns))
-        return any(
-            v is not None
-            and v.last_seen_stamp_ns >= since
-            and np.linalg.norm(np.array(v.position_world_m, float) - cut.centre_world_m)
-            <= self.s.attached_tolerance_m
-            for v, since in views
-        )
+        detected = f.frames_unseen == 0 and "position_jump" not in f.flags
+        return at_ready_ns is not None and detected and self._at_cut(f, at_ready_ns, cut)
+
+    def _at_cut(self, f: Fruit | None, since_ns: int, cut: CutState) -> bool:
+        """``f`` seen since ``since_ns`` within ``attached_tolerance_m`` of where it was cut."""
+        if f is None or f.last_seen_stamp_ns < since_ns:
+            return False
+        d_m = float(np.linalg.norm(np.array(f.position_world_m, float) - cut.centre_world_m))
+        return d_m <= self.s.attached_tolerance_m
 
     def _note_switches_and_moves(self) -> None:
         rec = self.target
