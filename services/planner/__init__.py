@@ -143,6 +143,21 @@ class Settings(ServiceSettings):
         description="… a sphere counts once the scene has listed it this long, or since its "
         "first states (a hand passing in front is occupied space while it is seen), s.",
     )
+    crowd_first: bool = Field(
+        default=False,
+        description="Before committing to a fruit, measure every IK solution of its harvest pose "
+        "and pre-pose (every robot body, the arms included) against the other fruit the scene "
+        "lists; when each solution of a pose comes within crowd_clearance_m of some neighbour "
+        "that can be harvested now, that neighbour goes first (crowd.py). It orders the "
+        "harvest and refuses nothing.",
+    )
+    crowd_clearance_m: float = Field(
+        default=0.0,
+        ge=0,
+        le=0.05,
+        description="… a robot body nearer than this to a neighbour's estimated ellipsoid "
+        "touches it (0: contact with the estimate), m.",
+    )
     neighbour_clearance_m: float = Field(
         default=0.0,
         ge=0,

@@ -59,6 +59,10 @@ class PlannerCore:
             self.machine.branches = BranchCheck(
                 s.branch_check_depth_m, s.branch_check_own_branch_m, s.branch_check_min_age_s
             )
+        if s.crowd_first:
+            from services.planner.crowd import CrowdCheck
+
+            self.machine.crowd = CrowdCheck(s.crowd_clearance_m)
         if s.plan_approach != "off":
             from services.planner.motion import ApproachPlanner
 

@@ -43,6 +43,7 @@ from services.planner import Settings
 from services.planner.book import FruitBook, FruitRecord
 from services.planner.branchcheck import BranchCheck
 from services.planner.clutter import blockers, clearable, same_fruit
+from services.planner.crowd import CrowdCheck, Crowding
 from services.planner.kinematics import Kinematics
 from services.planner.motion import ApproachPlanner
 from services.planner.order import nearest_first, planned_order
@@ -158,6 +159,7 @@ class Machine:
     left_because: str = ""  # the reason the next phase change carries (how a retrace ended)
     motion: ApproachPlanner | None = None  # plan_approach: planned joint paths to the pre-pose
     branches: BranchCheck | None = None  # branch_check: tool poses against the branches seen
+    crowd: CrowdCheck | None = None  # crowd_first: neighbours the arms would touch go first
     following: bool = False  # ``retrace`` is the planned approach path, not a way back
     replans_left: int = 0  # planned paths still allowed this attempt after one was left
     planned_after_stall: bool = False  # this attempt's stalled approach got its planned path
@@ -641,7 +643,7 @@ class Machine:
                 return None
             blocking = self._blockers(rec)
             if not blocking:
-                return rec, f"nearest ({rec.seen.distance_m:.3f} m from the camera)"
+                return self._crowd_pick(rec, cands, now)
             first_blocked = first_blocked or (rec, blocking)
             if not rec.deferred:
                 self._blocked(rec, blocking, now, wait=True)
@@ -653,6 +655,51 @@ class Machine:
                 return Wait(f"#{first_blocked[0].fruit_id} waits for {names} (hidden)")
             self._blocked(*first_blocked, now, wait=False)
         return None
+
+    def _crowd_pick(
+        self, rec: FruitRecord, cands: list[FruitRecord], now: int
+    ) -> tuple[FruitRecord, str] | None:
+        """``rec`` (the nearest free fruit) or, with ``crowd_first``, the nearest of the
+        neighbours its arms would touch at every IK solution of a pose that can be harvested
+        now: it goes first (its own crowders are not asked: no chain, no cycle). None: the
+        candidates changed."""
+        why = f"nearest ({rec.seen.distance_m:.3f} m from the camera)"
+        got = self._crowders(rec, cands)
+        if got is None:
+            return rec, why
+        crowders, crowding = got
+        names = ", ".join(f"#{c.fruit_id}" for c in crowders)
+        for c in sorted(crowders, key=lambda r: r.seen.distance_m):
+            if not self._check_reach(c, now):
+                return None
+            if not self._blockers(c):
+                return c, (
+                    f"before #{rec.fruit_id}, the nearest ({rec.seen.distance_m:.3f} m): "
+                    + crowding.why(names)
+                )
+        return rec, f"{why}; {crowding.why(names)}, none of which can go first"
+
+    def _crowders(
+        self, rec: FruitRecord, cands: list[FruitRecord]
+    ) -> tuple[list[FruitRecord], Crowding] | None:
+        """The candidates the arms would touch at every IK solution of ``rec``'s harvest pose
+        or pre-pose (``crowd.py``), and the verdict; None: none (or ``crowd_first`` off)."""
+        if self.crowd is None:
+            return None
+        present = self._on_tree(rec)
+        crowding = self.crowd.crowders(
+            self.kin,
+            [
+                ("harvest pose", harvest_pose(rec.planned, self.pose_settings)),
+                ("pre-pose", pre_pose(rec.planned, self.pose_settings)),
+            ],
+            [r.planned for r in present],
+        )
+        if crowding is None:
+            return None
+        keys = {r.key for r in cands}
+        crowders = [present[i] for i in crowding.neighbours if present[i].key in keys]
+        return (crowders, crowding) if crowders else None
 
     def _hidden_blockers(
         self, blocking: list[FruitRecord], cands: list[FruitRecord], now: int
@@ -688,6 +735,7 @@ class Machine:
                 self._blocked(ok[j], blocking[j], now, wait=False)
             return None
         before = [(i, j) for j, bl in blocked_by.items() for i in sorted(bl)]
+        before += self._crowd_before(ok, index, blocked_by)
         pts = np.array([pre_pose(r.planned, self.pose_settings).tip_world_m for r in ok])
         start = self.last_tip_world_m if self.last_tip_world_m is not None else self._ready_tip()
         order = planned_order(start, pts, self._ready_tip(), self.s.planned_exact_max, before)
@@ -695,6 +743,26 @@ class Machine:
         return rec, f"planned order ({len(ok)} fruit): " + " → ".join(
             str(ok[i].fruit_id) for i in order
         )
+
+    def _crowd_before(
+        self,
+        ok: list[FruitRecord],
+        index: dict[int, int],
+        blocked_by: dict[int, set[int]],
+    ) -> list[tuple[int, int]]:
+        """With ``crowd_first``: (crowder, fruit) pairs for the planned order, a neighbour the
+        arms would touch going for a fruit first; none when they would make a cycle with the
+        blockers (the order is then the blockers' alone)."""
+        soft: dict[int, set[int]] = {j: set() for j in blocked_by}
+        for j, r in enumerate(ok):
+            got = self._crowders(r, ok)
+            if got is not None:
+                soft[j] = {index[c.key] for c in got[0]}
+        if not any(soft.values()):
+            return []
+        if len(clearable({j: blocked_by[j] | soft[j] for j in blocked_by})) != len(ok):
+            return []
+        return [(i, j) for j, s in soft.items() for i in sorted(s)]
 
     def _hidden(self, now: int) -> list[FruitRecord]:
         """Fruit to do that were seen on the tree within ``hidden_wait_s`` and are not shown now
@@ -713,9 +781,9 @@ class Machine:
             if r is not rec and r.outcome in ("harvested", "dropped")
         )
 
-    def _blockers(self, rec: FruitRecord) -> list[FruitRecord]:
-        """Fruit on the tree (seen, not known to be off it) where the tools go for ``rec``."""
-        present = [
+    def _on_tree(self, rec: FruitRecord) -> list[FruitRecord]:
+        """The other fruit on the tree: seen, not known to be off it, no ghost."""
+        return [
             r
             for r in self.book.detected()
             if r is not rec
@@ -723,6 +791,10 @@ class Machine:
             and r.outcome not in ("harvested", "dropped")
             and not self._ghost(r)
         ]
+
+    def _blockers(self, rec: FruitRecord) -> list[FruitRecord]:
+        """Fruit on the tree (seen, not known to be off it) where the tools go for ``rec``."""
+        present = self._on_tree(rec)
         hit = blockers(
             rec.planned,
             [r.planned for r in present],
