@@ -522,6 +522,16 @@ def approach_plans(events: Sequence[Any]) -> dict[str, int]:
     }
 
 
+def crowd_picks(events: Sequence[Any]) -> dict[str, int]:
+    """Selections ``crowd_first`` made: a neighbour taken before the nearest fruit, whose arms
+    would touch it ("before #…, the nearest …")."""
+    return {
+        "crowd_first_picks": sum(
+            1 for e in events if e.event == "fruit_selected" and e.reason.startswith("before #")
+        )
+    }
+
+
 def evaluate(got: Collected, first_truth: GroundTruth, judged: Truth) -> dict[str, Any]:
     """Figures of one run against the truth (the first frame's fruit, before any cut, and
     ``judged`` on it: ``first_frame``)."""
@@ -577,6 +587,7 @@ def evaluate(got: Collected, first_truth: GroundTruth, judged: Truth) -> dict[st
         "reachable_fates": _fates(record, reachable, collected, first_truth),
         **retraces(got.harvest_events),
         **approach_plans(got.harvest_events),
+        **crowd_picks(got.harvest_events),
         **cuts(got.sim_events),
         "summary": s.model_dump(mode="json", exclude={"header"}) if s is not None else None,
     }
@@ -718,6 +729,7 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "approach_paths",
             "approach_no_path",
             "approach_paths_short",
+            "crowd_first_picks",
             *CUT_KEYS,
         )
     }
@@ -770,6 +782,7 @@ def table(result: dict[str, Any]) -> str:
         ("approach_paths", "planned approach paths"),
         ("approach_paths_short", "  of which left short"),
         ("approach_no_path", "planned approaches without a path"),
+        ("crowd_first_picks", "neighbours taken first (crowd_first)"),
         ("cuts", "cuts (shears closed)"),
         ("cuts_missed", "  of which missed"),
         ("cuts_at_nothing", f"  of which > {AT_NOTHING_M * 100:.0f} cm from any peduncle"),
