@@ -10,7 +10,7 @@ import pytest
 from services.planner import bench
 from services.planner.clutter import blockers
 from services.planner.crowd import CrowdCheck, nearest_ellipsoid
-from services.planner.poses import FruitShape, harvest_pose, pre_pose
+from services.planner.poses import harvest_pose, pre_pose
 from tests.unit.test_planner_select import A, core_with, fruit, harvest, select
 
 # Where the collector's forearm passes at every IK solution of A's harvest pose (found by
@@ -83,4 +83,3 @@ def test_a_witness_point_names_its_ellipsoid() -> None:
     semi = np.array([[0.04, 0.04, 0.05], [0.03, 0.03, 0.03]])
     assert nearest_ellipsoid(np.array([0.0, 0.0, 0.05]), centres, semi) == 0
     assert nearest_ellipsoid(np.array([0.07, 0.0, 0.0]), centres, semi) == 1
-    assert FruitShape(centres[0], 0.04, 0.05).d_v_m == 0.05
