@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 
 from services.cli import bench_perception
 
@@ -120,6 +121,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="override a service's setting for the run (sim, detector, tracker, scene, "
         "controller, planner), e.g. scene.occupancy=false; repeatable",
     )
+    h.add_argument(
+        "--events-out",
+        type=Path,
+        metavar="DIR",
+        help="write each run's harvest and sim events to DIR/ORDER-SEED.jsonl (diagnosis)",
+    )
     h.add_argument("--json", action="store_true", help="print one JSON object")
     h.set_defaults(func=cmd_bench_harvest)
 
@@ -194,6 +201,7 @@ def cmd_bench_harvest(args: argparse.Namespace) -> int:
             args.max_s,
             settings=parse_sets(args.set),
             jobs=args.jobs,
+            events_dir=args.events_out,
         )
         if cfg.jobs < 1:
             raise BenchError(f"--jobs must be at least 1, got {cfg.jobs}")

@@ -22,7 +22,7 @@ from __future__ import annotations
 import statistics
 import tempfile
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -379,12 +379,10 @@ def _track_fruit(
 TARGET_ENDS = ("fruit_collected", "fruit_dropped", "fruit_skipped", "fruit_lost", "run_finished")
 
 
-def _contacts(got: Collected, centres: dict[int, np.ndarray]) -> dict[str, int]:
-    """Robot contacts (sim events 'collision', each begun contact once), split: with the fruit
-    being harvested at the time (the tools are meant to touch it: cutting at its peduncle, the
-    dish under it) and with anything else (trunk, branches, leaves' twigs, other fruit, the
-    robot itself): the latter are the collisions."""
-    windows: list[tuple[int, int, int]] = []  # (start ns, end ns, sim fruit)
+def _target_windows(got: Collected, centres: dict[int, np.ndarray]) -> list[tuple[int, int, int]]:
+    """(start ns, end ns, sim fruit) of each harvest attempt: from its selection (or a
+    re-plan onto another fruit) to its outcome."""
+    windows: list[tuple[int, int, int]] = []
     current: tuple[int, int] | None = None  # (start ns, sim fruit)
     for ev in got.harvest_events:
         t = ev.header.stamp_ns
@@ -400,14 +398,71 @@ def _contacts(got: Collected, centres: dict[int, np.ndarray]) -> dict[str, int]:
             current = None
     if current is not None:
         windows.append((current[0], 2**62, current[1]))
-    began = [e for e in got.sim_events if e.kind == "collision" and "began" in e.detail]
-    target = 0
-    for e in began:
-        t = e.header.stamp_ns
+    return windows
+
+
+def _phases(events: Sequence[Any]) -> list[tuple[int, str]]:
+    """(stamp ns, phase entered) of the planner's phase changes, in time order."""
+    return [(e.header.stamp_ns, e.phase_to) for e in events if e.event == "phase_changed"]
+
+
+def _phase_at(phases: list[tuple[int, str]], t_ns: int) -> str:
+    now = "idle"
+    for t, phase in phases:
+        if t > t_ns:
+            break
+        now = phase
+    return now
+
+
+def body_kind(name: str) -> str:
+    """What a robot touched, from the sim's body name: trunk, branch or fruit."""
+    if name.startswith("branch_"):
+        return "branch"
+    if name.startswith("fruit_"):
+        return "fruit"
+    return name
+
+
+EPISODE_GAP_NS = 500_000_000  # a pair touching again within 0.5 s is the same contact episode
+
+
+def _contacts(got: Collected, centres: dict[int, np.ndarray]) -> dict[str, Any]:
+    """Robot contacts (sim events 'collision', each begun contact once), split: with the fruit
+    being harvested at the time (the tools are meant to touch it: cutting at its peduncle, the
+    dish under it) and with anything else (trunk, branches, other fruit hanging): the latter
+    are the collisions. Those are split again by what was touched and by the planner's phase
+    when the contact began, and counted as *episodes* too: a (link, body) pair that touches
+    again within ``EPISODE_GAP_NS`` of its last contact ending (a link grazing a branch
+    flickers) is one episode. Diagnostics: ``collisions`` stays the figure."""
+    windows = _target_windows(got, centres)
+    phases = _phases(got.harvest_events)
+    by_kind: dict[str, int] = {}
+    by_phase: dict[str, int] = {}
+    last_end: dict[tuple[str, str], int] = {}
+    target = episodes = 0
+    for e in got.sim_events:
+        if e.kind != "collision":
+            continue
+        t, pair = e.header.stamp_ns, (e.body_a, e.body_b)
+        if "began" not in e.detail:
+            last_end[pair] = t
+            continue
         fruit = [w[2] for w in windows if w[0] <= t <= w[1]]
         if fruit and e.body_b == f"fruit_{fruit[0]}":
             target += 1
-    return {"collisions": len(began) - target, "target_contacts": target}
+            continue
+        kind, phase = body_kind(e.body_b), _phase_at(phases, t)
+        by_kind[kind] = by_kind.get(kind, 0) + 1
+        by_phase[phase] = by_phase.get(phase, 0) + 1
+        episodes += pair not in last_end or t - last_end[pair] > EPISODE_GAP_NS
+    return {
+        "collisions": sum(by_kind.values()),
+        "target_contacts": target,
+        "collision_episodes": episodes,
+        "collisions_by_kind": dict(sorted(by_kind.items())),
+        "collisions_by_phase": dict(sorted(by_phase.items())),
+    }
 
 
 HIDDEN_SHARE = 0.05  # a fruit this little visible at the start is "hidden" when never detected
@@ -605,6 +660,7 @@ class BenchConfig:
     perception: NodeFactory | None = None  # tests: a stand-in chain (module-level with jobs)
     settings: dict[str, dict[str, Any]] = field(default_factory=dict)  # --set, by service
     jobs: int = 1  # inproc runs at once (processes)
+    events_dir: Path | None = None  # --events-out: each run's events as JSON lines here
 
 
 def run_harvest_bench(
@@ -672,7 +728,24 @@ def run_one(cfg: BenchConfig, order: str, seed: int, workdir: Path) -> dict[str,
     }
     row["rtf"] = round(sim_t / wall, 3) if wall > 0 else None
     row.update(evaluate(got, *first_frame(sim_s, plan_s)))
+    if cfg.events_dir is not None:
+        write_events(got, cfg.events_dir / f"{order}-{seed}.jsonl")
     return row
+
+
+def write_events(got: Collected, path: Path) -> None:
+    """The run's harvest and sim events as JSON lines in stamp order (a harvest event before a
+    sim event of the same stamp: the planner's tool command comes first), one
+    ``{"topic": …, **message}`` object per line: for diagnosis (``jq``, pandas)."""
+    import json
+
+    tagged = [("harvest/events", e) for e in got.harvest_events]
+    tagged += [("sim/events", e) for e in got.sim_events]
+    tagged.sort(key=lambda te: te[1].header.stamp_ns)  # stable: harvest first at a tie
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w") as f:
+        for topic, e in tagged:
+            f.write(json.dumps({"topic": topic, **e.model_dump(mode="json")}) + "\n")
 
 
 def first_frame(sim_s: dict[str, Any], plan_s: dict[str, Any]) -> tuple[GroundTruth, Truth]:
@@ -695,6 +768,14 @@ def first_frame(sim_s: dict[str, Any], plan_s: dict[str, Any]) -> tuple[GroundTr
         )
     finally:
         sim.close()
+
+
+def _sum_counts(counts: Iterable[dict[str, int]]) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for c in counts:
+        for k, n in c.items():
+            out[k] = out.get(k, 0) + n
+    return dict(sorted(out.items()))
 
 
 def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
@@ -722,6 +803,7 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "lost_crowded",
             "dropped",
             "collisions",
+            "collision_episodes",
             "target_contacts",
             "commands_clamped",
             "retraces",
@@ -739,6 +821,8 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
         **tot,
         "runs": len(rows),
         "reachable_fates": {k: sum(r["reachable_fates"].get(k, 0) for r in rows) for k in FATES},
+        "collisions_by_kind": _sum_counts(r.get("collisions_by_kind", {}) for r in rows),
+        "collisions_by_phase": _sum_counts(r.get("collisions_by_phase", {}) for r in rows),
         "success_rate": tot["harvested_reachable"] / tot["reachable"] if tot["reachable"] else 1.0,
         "success_rate_ik": (
             tot["harvested_reachable_ik"] / tot["reachable_ik"] if tot["reachable_ik"] else 1.0
@@ -772,6 +856,7 @@ def table(result: dict[str, Any]) -> str:
         ("lost_crowded", "  of which not harvested"),
         ("dropped", "dropped"),
         ("collisions", "collisions (robot contacts, target excluded)"),
+        ("collision_episodes", "  as episodes (a pair again within 0.5 s: one)"),
         ("target_contacts", "contacts with the fruit being harvested"),
         ("median_s_per_fruit", "median s per harvested fruit"),
         ("s_per_fruit_total", "run s per harvested fruit"),
@@ -806,4 +891,11 @@ def table(result: dict[str, Any]) -> str:
     for fate in FATES:
         cells = [f"{pols[o].get('reachable_fates', {}).get(fate, 0):>14}" for o in pols]
         lines.append(f"  {fate:32}" + "".join(cells))
+    for key, title in (("collisions_by_kind", "what"), ("collisions_by_phase", "phase")):
+        names = sorted({n for o in pols for n in pols[o].get(key, {})})
+        if names:
+            lines.append(f"collisions by {title}:")
+        for n in names:
+            cells = [f"{pols[o].get(key, {}).get(n, 0):>14}" for o in pols]
+            lines.append(f"  {n:32}" + "".join(cells))
     return "\n".join(lines)
