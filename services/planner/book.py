@@ -86,6 +86,19 @@ from 44 to 29 mm; the cutter missed the peduncle by 27 mm)."""
 REFINE_M = 0.005
 """The median of those views this far from such a target moves it: the views scatter 2-3 mm."""
 
+FALL_S = 2.0
+"""For this long after a cut, a fresh view under or beside the cut fruit (``FALL_ZONE_M``) that
+would start a record, or take an ID off its record (a reuse) or far from it, is the cut fruit
+falling, bouncing off the rim or rolling out of the dish: the tracker puts whatever ID is near
+on it (orchard seed 0: 0.45 s after a cut, the ID of a fruit harvested earlier came to the
+falling fruit 10 cm from where it hung; reborn there as a new fruit, it was selected 9 s later
+and the shears closed 19 cm from any peduncle, a "dropped" fruit that never was). It is not a
+fruit on the tree; such views are counted (``fall_views``) and otherwise left out. A fruit
+falls from the crown to the ground in about 0.5 s."""
+
+FALL_ZONE_M = 0.25
+"""… within this horizontally of where the cut fruit hung, and not above its top."""
+
 MIN_SIGHTINGS = 3
 """Scene states with a fresh sighting before a record is a candidate or stands in the tools'
 way: a fruit on the tree shows in many (15 a second), a flash does not (paper-exp2 seed 11:
@@ -173,6 +186,35 @@ class FruitBook:
     # The record in the harvest phase (planner.hold_cut_views_in_harvest): its cut views are
     # neither kept nor followed while the tools are in front of it.
     held_key: int | None = None
+    # The last cut: (record key, where the fruit hung, the cut's stamp ns); ``FALL_S``.
+    last_cut: tuple[int, FruitShape, int] | None = None
+    fall_views: list[tuple[int, int]] = field(default_factory=list)  # (stamp ns, ID) left out
+
+    def note_cut(self, key: int, stamp_ns: int) -> None:
+        """The shears closed on record ``key``: its fruit may fall now (``FALL_S``)."""
+        self.last_cut = (key, self.records[key].planned, stamp_ns)
+
+    def _falling(self, f: Fruit, stamp_ns: int) -> bool:
+        """``f`` is a fresh view where the fruit cut last may be falling now (``FALL_S``)."""
+        if self.last_cut is None or f.frames_unseen != 0:
+            return False
+        key, hung, cut_ns = self.last_cut
+        if not 0 <= stamp_ns - cut_ns <= FALL_S * 1e9 or f.fruit_id in self.records[key].ids:
+            return False
+        p, c = np.array(f.position_world_m, float), hung.centre_world_m
+        return bool(np.hypot(*(p[:2] - c[:2])) <= FALL_ZONE_M and p[2] <= c[2] + hung.d_v_m)
+
+    def _fall_view(self, f: Fruit, key: int | None, stamp_ns: int) -> bool:
+        """Leave ``f`` out: a falling fruit's view that would make a record, or that lies
+        farther than ``same_fruit_m`` from the record of its ID (a reuse, or a jump)."""
+        if not self._falling(f, stamp_ns):
+            return False
+        if key is not None:
+            p = np.array(f.position_world_m, float)
+            if np.linalg.norm(p - self.records[key].planned.centre_world_m) <= self.same_fruit_m:
+                return False  # a fruit hanging there, seen where it hangs
+        self.fall_views.append((stamp_ns, f.fruit_id))
+        return True
 
     def update(self, scene: SceneState, in_dish: InDish) -> None:
         """Take one scene state: new IDs, switches, positions, what is in the scene now."""
@@ -181,6 +223,10 @@ class FruitBook:
         for fid in sorted(now):
             f = now[fid]
             key = self.id_to_key.get(fid)
+            if self._fall_view(f, key, scene.header.stamp_ns):
+                if key is not None:
+                    present.add(key)
+                continue
             if key is not None and self._reused(self.records[key], f, in_dish):
                 key = self._reborn(self.records[key], f, now)
             if key is None:

@@ -379,6 +379,7 @@ class Machine:
             now, basket if basket is not None else 0, rec.planned.centre_world_m.copy()
         )
         self.tools.append(("cut", rec.fruit_id))
+        self.book.note_cut(rec.key, now)
         why = f"cut {rec.cuts}/{self.s.max_cut_attempts}{note}"
         self.events.append(Event("cut_sent", rec.fruit_id, reason=why))
         self._enter("cut", now)
@@ -863,6 +864,7 @@ class Machine:
         rec.frozen = True
         rec.attempt_ns = now
         self.cut = cut
+        self.book.note_cut(rec.key, cut.stamp_ns)
         self._enter("cut", now)
 
     # ---- helpers -----------------------------------------------------------------------------

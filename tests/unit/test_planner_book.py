@@ -491,3 +491,50 @@ def test_the_machine_holds_only_its_target_and_only_in_the_harvest_phase() -> No
     for k, phase in enumerate(("cut", "harvest", "leave", "approach", "home")):
         m._enter(phase, 2 + k)
         assert (book.held_key == 12) == (phase == "harvest")
+
+
+S = 1_000_000_000
+
+
+def test_a_harvested_fruits_id_on_the_falling_cut_fruit_is_no_new_fruit() -> None:
+    # Orchard seed 0: 0.45 s after the cut of #3, the tracker gave the ID of #4 (harvested
+    # earlier) to the falling fruit, 10 cm from where #3 hung and lower: reborn there, it was
+    # selected later and the shears closed on nothing.
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    b.update(scene(fruit(3, (0.73, 0.008, 1.319)), fruit(4, (0.62, 0.1, 1.45)), seq=1), never)
+    b.records[4].outcome = "harvested"
+    b.note_cut(3, 10 * S)
+    falling = fruit(4, (0.776, -0.082, 1.287))
+    for k in range(MIN_SIGHTINGS + 2):
+        b.update(scene(falling, seq=10 * S + (k + 6) * S // 15), never)
+    assert sorted(b.records) == [3, 4] and b.records[4].ids == [4] and b.candidates(45) == []
+    assert len(b.fall_views) == MIN_SIGHTINGS + 2 and b.reborn == []
+    # A new ID on the falling fruit makes no record either.
+    b.update(scene(fruit(31, (0.74, -0.03, 1.1)), seq=11 * S), never)
+    assert sorted(b.records) == [3, 4]
+
+
+def test_after_the_fall_window_a_reused_id_on_a_fruit_is_a_new_fruit_again() -> None:
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    b.update(scene(fruit(3, (0.73, 0.008, 1.319)), fruit(4, (0.62, 0.1, 1.45)), seq=1), never)
+    b.records[4].outcome = "harvested"
+    b.note_cut(3, 10 * S)
+    other = fruit(4, (0.776, -0.082, 1.287))
+    b.update(scene(other, seq=13 * S), never)  # 3 s after the cut: a fruit on the tree
+    assert sorted(b.records) == [-1, 3, 4] and b.fall_views == []
+
+
+def test_the_fall_window_leaves_other_fruit_alone() -> None:
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    below = (0.70, 0.05, 1.20)  # hangs under the cut fruit, in the zone
+    b.update(scene(fruit(3, (0.73, 0.008, 1.319)), fruit(5, below), seq=1), never)
+    b.note_cut(3, 10 * S)
+    high = fruit(6, (0.75, 0.0, 1.45))  # above the cut fruit's top: not where it falls
+    far = fruit(7, (0.40, 0.3, 1.20))  # 40 cm aside
+    for k in range(MIN_SIGHTINGS):
+        b.update(scene(fruit(5, below), high, far, seq=10 * S + (k + 1) * S // 15), never)
+    assert sorted(b.records) == [3, 5, 6, 7] and b.fall_views == []
+    assert b.records[5].sightings == MIN_SIGHTINGS + 1
+    # The cut fruit's own ID is its own record's business (in the dish, fallen: book rules).
+    b.update(scene(fruit(3, (0.74, 0.0, 1.15)), seq=10 * S + S // 2), never)
+    assert b.fall_views == []
