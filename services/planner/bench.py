@@ -393,12 +393,23 @@ def _target_windows(got: Collected, centres: dict[int, np.ndarray]) -> list[tupl
                 if current is not None:
                     windows.append((current[0], t, current[1]))
                 current = (t, on)
-        elif ev.event in TARGET_ENDS and current is not None:
+        elif ev.event in TARGET_ENDS and current is not None and _ends(got, ev, current, centres):
             windows.append((current[0], t, current[1]))
             current = None
     if current is not None:
         windows.append((current[0], 2**62, current[1]))
     return windows
+
+
+def _ends(
+    got: Collected, ev: Any, current: tuple[int, int], centres: dict[int, np.ndarray]
+) -> bool:
+    """``ev`` (an outcome) ends the attempt ``current`` (start ns, sim fruit): it names no
+    fruit (the run's end) or that fruit; not another fruit's (a fruit deferred meanwhile)."""
+    if ev.fruit_id is None:
+        return True
+    on = _track_fruit(got, ev.fruit_id, centres, ev.header.stamp_ns)
+    return on is None or on == current[1]
 
 
 def _phases(events: Sequence[Any]) -> list[tuple[int, str]]:

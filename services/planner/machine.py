@@ -1070,6 +1070,29 @@ class Machine:
                 )
         self.book.switches.clear()
         self.book.moved.clear()
+        for key in self.book.back_on_branch:
+            self._not_dropped(self.book.records[key])
+        self.book.back_on_branch.clear()
+
+    def _not_dropped(self, rec: FruitRecord) -> None:
+        """A fruit reported dropped is seen hanging where it was cut (``FruitBook``): the cut
+        missed. Its IDs are no longer ignored (the controller avoids it again); while cuts are
+        left it is a candidate again, after the others, aimed deeper as a retry; else its
+        cuts failed."""
+        if rec is self.target or rec.outcome != "dropped":
+            return
+        seen = "seen on its branch again after it was reported dropped: the cut missed"
+        if rec.cuts < self.s.max_cut_attempts:
+            rec.outcome, rec.reason, rec.outcome_id, rec.finished_ns = None, "", None, None
+            rec.frozen, rec.deferred = False, True
+            rec.scene_mark_ok = False  # the scene's mark on the ID echoes the verdict withdrawn
+            rec.aim_deeper_m = self.s.retry_aim_deeper_m
+            why = f"{seen}; retried after the others"
+            self.events.append(Event("fruit_skipped", rec.fruit_id, reason=why))
+            return
+        why = f"cut failed {rec.cuts} times ({seen})"
+        rec.outcome, rec.reason, rec.outcome_id = "cut_failed", why, rec.fruit_id
+        self.events.append(Event("fruit_skipped", rec.fruit_id, outcome="cut_failed", reason=why))
 
     def _ready_tip(self) -> np.ndarray:
         return self.kin.ready_tip_world_m

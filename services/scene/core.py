@@ -220,6 +220,11 @@ class SceneCore:
         elif ev.event == "fruit_skipped" and ev.outcome == "unreachable":
             self.fruits.mark(ev.fruit_id, "unreachable")
             self.counters["mark_unreachable"] += 1
+        elif ev.event == "fruit_skipped" and ev.outcome is None:
+            # Deferred: still to do for the planner, so a mark on the ID was another fruit's or
+            # a verdict withdrawn (a fruit reported dropped, seen on its branch again): it
+            # hangs there, an obstacle and a candidate.
+            self.fruits.unmark(ev.fruit_id)
 
     # ---- one Tracks message ------------------------------------------------------------------
     def _answer(self, tracks: Tracks) -> SceneState:

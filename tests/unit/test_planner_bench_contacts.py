@@ -80,3 +80,13 @@ def test_events_are_written_in_stamp_order(tmp_path: Path) -> None:
     # at a tie the planner's event comes first (its tool command precedes the sim's answer)
     assert [d["topic"] for d in lines[-4:-2]] == ["harvest/events", "harvest/events"]
     assert lines[3] == {"topic": "sim/events", **collected().sim_events[1].model_dump(mode="json")}
+
+
+def test_another_fruit_deferred_mid_attempt_does_not_end_it() -> None:
+    got = collected()
+    got.sightings[9] = [(0, (0.5, -0.3, 1.3))]  # track 9 on sim fruit 5
+    skip = hev(2550, "fruit_skipped", fruit_id=9, reason="seen on its branch again")
+    got.harvest_events.insert(3, skip)
+    got.sim_events.insert(6, contact(2700, "basket", "fruit_3", True))  # still the target
+    c = bench._contacts(got, CENTRES)
+    assert (c["collisions"], c["target_contacts"]) == (5, 2)
