@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from schemas.base import Header
 from schemas.scene import Fruit, Obstacles, SceneState, Trunk
@@ -538,3 +539,16 @@ def test_the_fall_window_leaves_other_fruit_alone() -> None:
     # The cut fruit's own ID is its own record's business (in the dish, fallen: book rules).
     b.update(scene(fruit(3, (0.74, 0.0, 1.15)), seq=10 * S + S // 2), never)
     assert b.fall_views == []
+
+
+def test_a_far_view_in_the_fall_window_moves_a_target_only_after_it() -> None:
+    # A view of a fruit still to do, 6 cm from where it hangs, within 2 s of a neighbour's cut
+    # and under it: as likely the falling fruit under that fruit's ID as a push. Left out for
+    # the window (measured so, BENCHMARKS.md, Harvest, session 33); after it, a push moves it.
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    b.update(scene(fruit(3, (0.73, 0.008, 1.319)), fruit(5, (0.70, 0.05, 1.20)), seq=1), never)
+    b.note_cut(3, 10 * S)
+    b.update(scene(fruit(5, (0.70, 0.11, 1.20)), seq=10 * S + S // 2), never)
+    assert len(b.fall_views) == 1 and b.records[5].planned.centre_world_m[1] == 0.05
+    b.update(scene(fruit(5, (0.70, 0.11, 1.20)), seq=13 * S), never)
+    assert b.records[5].planned.centre_world_m[1] == pytest.approx(0.11)
