@@ -497,14 +497,20 @@ def test_the_machine_holds_only_its_target_and_only_in_the_harvest_phase() -> No
 S = 1_000_000_000
 
 
-def test_a_harvested_fruits_id_on_the_falling_cut_fruit_is_no_new_fruit() -> None:
-    # Orchard seed 0: 0.45 s after the cut of #3, the tracker gave the ID of #4 (harvested
-    # earlier) to the falling fruit, 10 cm from where #3 hung and lower: reborn there, it was
-    # selected later and the shears closed on nothing.
+def cut_after_a_harvest() -> FruitBook:
+    """#4 harvested, then #3 cut at 10 s."""
     b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
     b.update(scene(fruit(3, (0.73, 0.008, 1.319)), fruit(4, (0.62, 0.1, 1.45)), seq=1), never)
     b.records[4].outcome = "harvested"
     b.note_cut(3, 10 * S)
+    return b
+
+
+def test_a_harvested_fruits_id_on_the_falling_cut_fruit_is_no_new_fruit() -> None:
+    # Orchard seed 0: 0.45 s after the cut of #3, the tracker gave the ID of #4 (harvested
+    # earlier) to the falling fruit, 10 cm from where #3 hung and lower: reborn there, it was
+    # selected later and the shears closed on nothing.
+    b = cut_after_a_harvest()
     falling = fruit(4, (0.776, -0.082, 1.287))
     for k in range(MIN_SIGHTINGS + 2):
         b.update(scene(falling, seq=10 * S + (k + 6) * S // 15), never)
@@ -516,10 +522,7 @@ def test_a_harvested_fruits_id_on_the_falling_cut_fruit_is_no_new_fruit() -> Non
 
 
 def test_after_the_fall_window_a_reused_id_on_a_fruit_is_a_new_fruit_again() -> None:
-    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
-    b.update(scene(fruit(3, (0.73, 0.008, 1.319)), fruit(4, (0.62, 0.1, 1.45)), seq=1), never)
-    b.records[4].outcome = "harvested"
-    b.note_cut(3, 10 * S)
+    b = cut_after_a_harvest()
     other = fruit(4, (0.776, -0.082, 1.287))
     b.update(scene(other, seq=13 * S), never)  # 3 s after the cut: a fruit on the tree
     assert sorted(b.records) == [-1, 3, 4] and b.fall_views == []

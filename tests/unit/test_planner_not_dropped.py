@@ -7,22 +7,14 @@ from __future__ import annotations
 
 from schemas.base import Header
 from schemas.harvest import HarvestEvent
-from schemas.scene import Fruit, Obstacles, SceneState, Trunk
+from schemas.scene import Fruit
 from services.planner.book import MIN_SIGHTINGS, FruitRecord
 from services.planner.core import PlannerCore
 from services.runtime.settings import load_settings
 from services.scene import Settings as SceneSettings
 from services.scene.core import SceneCore
+from tests.unit.test_planner_book import scene
 from tests.unit.test_planner_select import A, B, core_with, fruit
-
-
-def state(*fruits: Fruit, seq: int = 10) -> SceneState:
-    return SceneState(
-        header=Header(stamp_ns=seq, seq=seq, source="scene"),
-        fruits=fruits,
-        trunk=Trunk(found=False),
-        obstacles=Obstacles(),
-    )
 
 
 def no_dish(_f: Fruit, resting: bool = False) -> bool:
@@ -40,7 +32,7 @@ def dropped_core(cuts: int = 1) -> tuple[PlannerCore, FruitRecord]:
 
 def views(core: PlannerCore, f: Fruit, n: int) -> None:
     for k in range(n):
-        core.book.update(state(f, seq=20 + k), no_dish)
+        core.book.update(scene(f, seq=20 + k), no_dish)
         core.machine._note_switches_and_moves()
 
 
