@@ -19,9 +19,11 @@ own clearance check, on the true fruit).
 
 from __future__ import annotations
 
+import bisect
 import statistics
 import tempfile
 import time
+from collections import Counter
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -412,18 +414,15 @@ def _ends(
     return on is None or on == current[1]
 
 
-def _phases(events: Sequence[Any]) -> list[tuple[int, str]]:
-    """(stamp ns, phase entered) of the planner's phase changes, in time order."""
-    return [(e.header.stamp_ns, e.phase_to) for e in events if e.event == "phase_changed"]
+def _phases(events: Sequence[Any]) -> tuple[list[int], list[str]]:
+    """Stamps (ns) and phases entered of the planner's phase changes, in time order."""
+    changes = [e for e in events if e.event == "phase_changed"]
+    return [e.header.stamp_ns for e in changes], [e.phase_to for e in changes]
 
 
-def _phase_at(phases: list[tuple[int, str]], t_ns: int) -> str:
-    now = "idle"
-    for t, phase in phases:
-        if t > t_ns:
-            break
-        now = phase
-    return now
+def _phase_at(phases: tuple[list[int], list[str]], t_ns: int) -> str:
+    i = bisect.bisect_right(phases[0], t_ns)
+    return phases[1][i - 1] if i else "idle"
 
 
 def body_kind(name: str) -> str:
@@ -448,8 +447,8 @@ def _contacts(got: Collected, centres: dict[int, np.ndarray]) -> dict[str, Any]:
     flickers) is one episode. Diagnostics: ``collisions`` stays the figure."""
     windows = _target_windows(got, centres)
     phases = _phases(got.harvest_events)
-    by_kind: dict[str, int] = {}
-    by_phase: dict[str, int] = {}
+    by_kind: Counter[str] = Counter()
+    by_phase: Counter[str] = Counter()
     last_end: dict[tuple[str, str], int] = {}
     target = episodes = 0
     for e in got.sim_events:
@@ -463,9 +462,8 @@ def _contacts(got: Collected, centres: dict[int, np.ndarray]) -> dict[str, Any]:
         if fruit and e.body_b == f"fruit_{fruit[0]}":
             target += 1
             continue
-        kind, phase = body_kind(e.body_b), _phase_at(phases, t)
-        by_kind[kind] = by_kind.get(kind, 0) + 1
-        by_phase[phase] = by_phase.get(phase, 0) + 1
+        by_kind[body_kind(e.body_b)] += 1
+        by_phase[_phase_at(phases, t)] += 1
         episodes += pair not in last_end or t - last_end[pair] > EPISODE_GAP_NS
     return {
         "collisions": sum(by_kind.values()),
@@ -782,11 +780,10 @@ def first_frame(sim_s: dict[str, Any], plan_s: dict[str, Any]) -> tuple[GroundTr
 
 
 def _sum_counts(counts: Iterable[dict[str, int]]) -> dict[str, int]:
-    out: dict[str, int] = {}
+    total: Counter[str] = Counter()
     for c in counts:
-        for k, n in c.items():
-            out[k] = out.get(k, 0) + n
-    return dict(sorted(out.items()))
+        total.update(c)
+    return dict(sorted(total.items()))
 
 
 def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:

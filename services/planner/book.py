@@ -302,9 +302,9 @@ class FruitBook:
         hid it, and the cut had missed (orchard seed 8: missed by 23 mm, reported dropped;
         its later track joined the record, and the controller, told to ignore a fruit off the
         tree, pushed the arms through it 38 times). Noted in ``back_on_branch``, once."""
-        p = np.array(f.position_world_m, float)
         if not _estimated(f) or in_dish(f):
             return
+        p = np.array(f.position_world_m, float)
         if np.linalg.norm(p - rec.planned.centre_world_m) > self.same_fruit_m:
             return
         rec.views_after_drop += 1
