@@ -205,6 +205,11 @@ def cmd_bench_harvest(args: argparse.Namespace) -> int:
         )
         if cfg.jobs < 1:
             raise BenchError(f"--jobs must be at least 1, got {cfg.jobs}")
+        if cfg.events_dir is not None:
+            try:  # before the runs: a bad path must not cost an hour of them
+                cfg.events_dir.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise BenchError(f"--events-out {cfg.events_dir}: {exc.strerror}") from None
         bad = [o for o in cfg.orders if o not in ("nearest", "planned")]
         if bad:
             raise BenchError(f"unknown order policies {bad} (nearest, planned)")

@@ -136,3 +136,10 @@ def test_jobs_run_seeds_side_by_side_with_the_same_rows(tmp_path: Path) -> None:
     assert [r["seed"] for r in two["runs"]] == [3, 4]
     assert strip[0] == strip[1]
     assert one["runs"][0]["harvested"] >= 1  # the runs did something
+
+
+def test_a_bad_events_out_path_stops_before_the_runs(tmp_path: Path) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    r = harvest("bench", "harvest", "--seeds", "0", "--events-out", str(blocker / "ev"), timeout=60)
+    assert r.returncode == 2 and "--events-out" in r.stderr
