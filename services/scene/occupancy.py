@@ -113,7 +113,7 @@ class OccupancyGrid:
         # background behind a hand that swept past is often that far (paper-exp1: the hand's
         # voxels stayed in front of the arms for the rest of the run).
         self._clear(depth_m, measured, K, T)
-        self._blank(mask, measured, K, T, robot)
+        self._blank(mask, depth_m, measured, K, T, robot)
         pts = _points_world(mask & valid, depth_m, K, T, self.p.stride_px)
         if robot and len(pts):
             pts = pts[~_near_robot(pts, robot, self.p.robot_margin_m)]
@@ -188,27 +188,36 @@ class OccupancyGrid:
     def _blank(
         self,
         mask: np.ndarray,
+        depth_m: np.ndarray,
         measured: np.ndarray,
         K: Pinhole,
         T: RigidTransform,
         robot: Sequence[Capsule],
     ) -> None:
-        """Forget voxels whose pixel has shown no depth return and no bark for ``blank_frames``
-        frames since their last hit, the robot not in the line of sight: what was there is gone
-        and nothing stands behind it within the camera's range (a hand swept in front of the
-        sky or a far wall; paper-exp1 seed 0, a hand's voxel stayed for the rest of the run,
-        because nothing behind it ever gave depth). A branch in the stereo shadow of a nearer
-        object still shows bark; one behind an arm has the arm in its line of sight."""
+        """Forget voxels whose pixel has shown no depth return and no bark that may stand at
+        the voxel for ``blank_frames`` frames since their last hit, the robot not in the line
+        of sight: what was there is gone and nothing stands behind it within the camera's range
+        (a hand swept in front of the sky or a far wall; paper-exp1 seed 0, a hand's voxel
+        stayed for the rest of the run, because nothing behind it ever gave depth). A branch in
+        the stereo shadow of a nearer object still shows bark (no depth); one behind an arm has
+        the arm in its line of sight. Bark measured ``clear_margin_m`` behind the voxel is a
+        branch further back, no sign of one here (paper-exp1 seed 11: the hand that moved a
+        fruit left a voxel 43 cm in front of a branch end whose bark edged its pixel; read as a
+        branch under the fruit, it had the fruit given up as unreachable)."""
         if not self.voxels or self.p.blank_frames == 0:
             return
         keys = list(self.voxels)
-        uv = _pixels(np.array([self.voxels[k].center_m for k in keys]), K, T)
+        centres_m = np.array([self.voxels[k].center_m for k in keys])
+        uv = _pixels(centres_m, K, T)
+        z_m = T.to_camera(centres_m)[:, 2]
         w = BLANK_WINDOW_PX
         blank = []
         for i, (u, v) in enumerate(uv):
             if u < 0 or measured[v, u]:
                 continue  # out of view, or depth there (the clearing rule's evidence)
-            if mask[max(v - w, 0) : v + w + 1, max(u - w, 0) : u + w + 1].any():
+            win = np.s_[max(v - w, 0) : v + w + 1, max(u - w, 0) : u + w + 1]
+            behind = measured[win] & (depth_m[win] > z_m[i] + self.p.clear_margin_m)
+            if (mask[win] & ~behind).any():
                 self.voxels[keys[i]].blank_frames = 0  # bark seen there: it may stand there
                 continue
             blank.append(i)

@@ -235,6 +235,39 @@ def test_a_hand_in_front_of_nothing_in_range_is_forgotten_once_gone() -> None:
         assert (len(grid.obstacles()) > 0) is kept, (blank, robot)
 
 
+def test_bark_far_behind_a_hand_does_not_keep_it() -> None:
+    """A hand in front of nothing in range, then a branch far behind where it was whose bark
+    edges the voxels' pixels (their own pixels give no depth): the bark is 0.9 m behind, no
+    branch at the hand's place, and the hand is forgotten after blank_frames (paper-exp1 seed
+    11: the hand that moved a fruit stayed as a branch under it and the fruit was given up).
+    The same bark with no depth (a stereo shadow: it may stand there) keeps it."""
+    hand = scene_of((0.3, BRANCH, BARK))
+    probe = OccupancyGrid(P)
+    probe.step(bark_mask(hand), hand.depth, K, T, ())
+    uv = [
+        (round(K.fx * c[0] / c[2] + K.cx), round(K.fy * c[1] / c[2] + K.cy))
+        for c in T.to_camera(np.array([s.center_world_m for s in probe.obstacles()]))
+    ]
+    for far_depth_m, kept in ((1.2, False), (0.0, True)):
+        behind = scene_of((1.2, BRANCH, BARK))
+        behind.depth[behind.depth > 0] = far_depth_m
+        for u, v in uv:
+            behind.depth[v, u], behind.rgb[v, u] = 0.0, 200  # its own pixel: the far wall
+        grid = OccupancyGrid(P)
+        for _ in range(3):
+            grid.step(bark_mask(hand), hand.depth, K, T, ())
+        assert len(near_hand(grid)) == len(uv) > 0
+        for _ in range(P.blank_frames):
+            grid.step(bark_mask(behind), behind.depth, K, T, ())
+        assert len(near_hand(grid)) == (len(uv) if kept else 0), far_depth_m
+
+
+def near_hand(grid: OccupancyGrid) -> list[object]:
+    """The spheres nearer the camera than 0.6 m (the hand's; the far branch makes its own)."""
+    z = T.to_camera(centres(grid).reshape(-1, 3))[:, 2] if grid.obstacles() else np.zeros(0)
+    return [s for s, zi in zip(grid.obstacles(), z, strict=True) if zi < 0.6]
+
+
 def test_a_branch_seen_from_the_start_or_uncovered_stays_where_an_arm_hides_it() -> None:
     """A branch is never seen through before it is seen: there from the first frame, or
     uncovered by a leaf that swung away, it is remembered behind the arm."""
