@@ -8,7 +8,12 @@ run, what the run has shown is used to fold records that were one fruit:
   after a harvest);
 * a fruit reported dropped (not in the basket after the cut, not seen on its branch) that is
   harvested later where it hung was not dropped: the cut missed (the tools hid it) and the
-  harvest supersedes the verdict; its time and cuts add up.
+  harvest supersedes the verdict; its time and cuts add up;
+* a record attempted, deferred and still to do at the end, that overlaps a record harvested
+  after it was first attempted, was that fruit under the track ID it had before it moved: a
+  hand moved the fruit, the tracker gave it a new ID, and the old track stayed for a while
+  where it had hung (paper-exp1 seed 11: #6 approached, deferred, never seen again, while the
+  fruit was harvested as #37); its time adds up.
 """
 
 from __future__ import annotations
@@ -33,7 +38,10 @@ class PhysicalFruit:
 
     def absorb(self, earlier: FruitRecord) -> None:
         """``earlier`` was an attempt at this fruit: its start, time and cuts count here."""
-        self.started_ns = earlier.started_ns
+        if self.started_ns is None or (
+            earlier.started_ns is not None and earlier.started_ns < self.started_ns
+        ):
+            self.started_ns = earlier.started_ns
         self.spent_ns += earlier.spent_ns
         self.cuts += earlier.cuts
 
@@ -45,9 +53,13 @@ def physical_fruit(records: list[FruitRecord]) -> list[PhysicalFruit]:
         if _never_attempted(r) and any(_same(o, r, out) for o in records):
             del out[r.key]  # a second track of a fruit listed on its own
     for d in records:
-        if d.outcome != "dropped" or d.finished_ns is None:
+        if d.outcome == "dropped" and d.finished_ns is not None:
+            since_ns = d.finished_ns
+        elif d.outcome is None and d.deferred and d.started_ns is not None:
+            since_ns = d.started_ns
+        else:
             continue
-        later = [o for o in records if _harvested_after(o, d.finished_ns) and _same(o, d, out)]
+        later = [o for o in records if _harvested_after(o, since_ns) and _same(o, d, out)]
         if later:
             out[later[0].key].absorb(d)
             del out[d.key]

@@ -1,5 +1,6 @@
 """The run summary folds the book's records into physical fruit: a pending second track of a
-listed fruit, and a 'dropped' verdict superseded by a later harvest where the fruit hung."""
+listed fruit, a 'dropped' verdict superseded by a later harvest where the fruit hung, and a
+deferred attempt at a fruit harvested later under another ID."""
 
 from __future__ import annotations
 
@@ -116,3 +117,26 @@ def test_a_fruit_is_listed_under_the_id_its_outcome_was_reported_under() -> None
     recs[72].fruit_id = 13  # a later ID (not a step of the machine; as the book may set)
     summary = run_summary(Header(stamp_ns=S, seq=0, source="planner"), core.s, core.book, 0, S)
     assert sorted(f.fruit_id for f in summary.fruits) == [13, 72]
+
+
+def test_a_deferred_attempt_at_a_fruit_harvested_later_under_another_id_is_that_fruit() -> None:
+    """paper-exp1 seed 11: a hand moved fruit #6 by 6-7 cm, the tracker gave it ID 37 and kept
+    #6 where it had hung; #6 was approached, deferred and never seen again; #37 was harvested.
+    One fruit, harvested, its time summed; a deferred fruit elsewhere stays pending."""
+    ghost = record(
+        6, (0.695, -0.075, 1.214), deferred=True, started_ns=10 * S, spent_ns=3 * S, cuts=0
+    )
+    moved = record(
+        37, (0.695, -0.02, 1.24), outcome="harvested", started_ns=14 * S, spent_ns=4 * S, cuts=1
+    )
+    elsewhere = record(8, (0.6, 0.2, 1.3), deferred=True, started_ns=11 * S)
+    got = physical_fruit([ghost, moved, elsewhere])
+    assert [f.rec.key for f in got] == [37, 8]
+    assert (got[0].started_ns, got[0].spent_ns, got[0].cuts) == (10 * S, 7 * S, 1)
+
+
+def test_a_deferred_fruit_harvested_before_its_neighbour_was_attempted_is_its_own() -> None:
+    harvested_first = record(1, (0.6, 0.0, 1.3), outcome="harvested", started_ns=2 * S)
+    deferred_later = record(2, (0.6, 0.06, 1.3), deferred=True, started_ns=9 * S)
+    got = physical_fruit([harvested_first, deferred_later])
+    assert [f.rec.key for f in got] == [1, 2]
