@@ -99,6 +99,13 @@ falls from the crown to the ground in about 0.5 s."""
 FALL_ZONE_M = 0.25
 """… within this horizontally of where the cut fruit hung, and not above its top."""
 
+STILL_S, STILL_M = 0.3, 0.015
+"""… unless the scene has estimated the view's ID within ``STILL_M`` of one place for
+``STILL_S``: a falling or bouncing fruit does not hold still (it falls 0.44 m in 0.3 s), a fruit
+hanging there does (paper-exp1 seed 11: a hand left a fruit 16 cm from and 7 cm under a fruit
+cut 0.1 s before; its new track was left out for 2 s, and the tools went for the old track, where
+the fruit had hung)."""
+
 MIN_SIGHTINGS = 3
 """Scene states with a fresh sighting before a record is a candidate or stands in the tools'
 way: a fruit on the tree shows in many (15 a second), a flash does not (paper-exp2 seed 11:
@@ -137,6 +144,7 @@ class FruitRecord:
     scene_mark_ok: bool = True  # False: its ID was another fruit's, whose scene mark it carries
     reach: tuple[ReachVerdict, ReachVerdict] | None = None  # harvest pose, pre-pose
     last_seen_ns: int | None = None  # the last scene stamp with a fresh sighting of any of its IDs
+    first_seen_ns: int | None = None  # the first such stamp
     sightings: int = 0  # scene states with a fresh sighting of it outside our dish
     sizes_m: deque[tuple[float, float]] = field(
         default_factory=lambda: deque(maxlen=RECENT_VIEWS)
@@ -190,6 +198,8 @@ class FruitBook:
     # The last cut: (record key, where the fruit hung, the cut's stamp ns); ``FALL_S``.
     last_cut: tuple[int, FruitShape, int] | None = None
     fall_views: list[tuple[int, int]] = field(default_factory=list)  # (stamp ns, ID) left out
+    # ID → (where its estimates have stayed within STILL_M, since when ns): ``STILL_S``
+    still: dict[int, tuple[np.ndarray, int]] = field(default_factory=dict)
     back_on_branch: list[int] = field(default_factory=list)  # keys: dropped, seen hanging
 
     def note_cut(self, key: int, stamp_ns: int) -> None:
@@ -204,7 +214,20 @@ class FruitBook:
         if not 0 <= stamp_ns - cut_ns <= FALL_S * 1e9 or f.fruit_id in self.records[key].ids:
             return False
         p, c = np.array(f.position_world_m, float), hung.centre_world_m
-        return bool(np.hypot(*(p[:2] - c[:2])) <= FALL_ZONE_M and p[2] <= c[2] + hung.d_v_m)
+        if np.hypot(*(p[:2] - c[:2])) > FALL_ZONE_M or p[2] > c[2] + hung.d_v_m:
+            return False
+        still = self.still.get(f.fruit_id)
+        return not (_estimated(f) and still is not None and stamp_ns - still[1] >= STILL_S * 1e9)
+
+    def _hold(self, f: Fruit, stamp_ns: int) -> None:
+        """Note where ``f``'s ID is estimated (``STILL_S``): from this frame's view only (a
+        kept estimate stays put whatever the fruit does)."""
+        if not _estimated(f):
+            return
+        p = np.array(f.position_world_m, float)
+        still = self.still.get(f.fruit_id)
+        if still is None or np.linalg.norm(p - still[0]) > STILL_M:
+            self.still[f.fruit_id] = (p, stamp_ns)
 
     def _fall_view(self, f: Fruit, key: int | None, stamp_ns: int) -> bool:
         """Leave ``f`` out: a falling fruit's view that would make a record, or that lies
@@ -225,6 +248,7 @@ class FruitBook:
         for fid in sorted(now):
             f = now[fid]
             key = self.id_to_key.get(fid)
+            self._hold(f, scene.header.stamp_ns)
             if self._fall_view(f, key, scene.header.stamp_ns):
                 if key is not None:
                     present.add(key)
@@ -241,6 +265,8 @@ class FruitBook:
             if fid == rec.fruit_id:
                 self._observe(rec, f, in_dish)
             if f.frames_unseen == 0 and not in_dish(f):
+                if rec.first_seen_ns is None:
+                    rec.first_seen_ns = scene.header.stamp_ns
                 rec.last_seen_ns = scene.header.stamp_ns
                 rec.sightings += 1
         for key in sorted(self.records):

@@ -585,7 +585,11 @@ class Machine:
 
     # ---- selection ---------------------------------------------------------------------------
     def _candidates(self) -> list[FruitRecord]:
-        return [r for r in self.book.candidates(self.s.lost_after_frames) if not self._ghost(r)]
+        return [
+            r
+            for r in self.book.candidates(self.s.lost_after_frames)
+            if not self._ghost(r) and not self._left_behind(r)
+        ]
 
     def _select(self, now: int) -> None:
         """The next fruit by the policy. Before committing: the IK must reach its poses
@@ -768,7 +772,11 @@ class Machine:
     def _hidden(self, now: int) -> list[FruitRecord]:
         """Fruit to do that were seen on the tree within ``hidden_wait_s`` and are not shown now
         (leaves, a person, the arms in front): the run waits for them (ghosts aside)."""
-        return [r for r in self.book.hidden(now, self.s.hidden_wait_s) if not self._ghost(r)]
+        return [
+            r
+            for r in self.book.hidden(now, self.s.hidden_wait_s)
+            if not self._ghost(r) and not self._left_behind(r)
+        ]
 
     def _ghost(self, rec: FruitRecord) -> bool:
         """A record not seen now that overlaps a fruit known to be off the tree (harvested,
@@ -780,6 +788,28 @@ class Machine:
             same_fruit(rec.planned, r.planned)
             for r in self.book.detected()
             if r is not rec and r.outcome in ("harvested", "dropped")
+        )
+
+    def _left_behind(self, rec: FruitRecord) -> bool:
+        """A record the scene has not estimated from a view since another record overlapping
+        it (``same_fruit``: no two fruit are that close) was first seen, estimated since, is
+        that fruit under a new track ID, moved away from where the old track stays (paper-exp1
+        seed 11: a hand moved a fruit 6.7 cm; the tracker gave it ID 37 and kept ID 6 alive on
+        views the scene could not estimate where it had hung; the tools went for #6 and
+        stalled). Not a candidate, and not waited for; it is one again once estimated anew."""
+        if rec.finished:
+            return False
+        since = rec.viewed.last_seen_stamp_ns if rec.viewed is not None else -1
+        return any(
+            r.first_seen_ns is not None
+            and r.first_seen_ns > since
+            and r.viewed is not None
+            and r.viewed.last_seen_stamp_ns > since
+            and r.confirmed
+            and r.outcome in (None, "harvested")
+            and same_fruit(rec.planned, r.planned)
+            for r in self.book.detected()
+            if r is not rec
         )
 
     def _on_tree(self, rec: FruitRecord) -> list[FruitRecord]:

@@ -8,7 +8,13 @@ import pytest
 from schemas.base import Header
 from schemas.scene import Fruit, Obstacles, SceneState, Trunk
 from services.planner import Settings
-from services.planner.book import MIN_RECENT_VIEWS, MIN_SIGHTINGS, FruitBook, inside_dish
+from services.planner.book import (
+    MIN_RECENT_VIEWS,
+    MIN_SIGHTINGS,
+    STILL_S,
+    FruitBook,
+    inside_dish,
+)
 from services.planner.core import PlannerCore
 from services.planner.kinematics import DishPose, ReachVerdict
 from services.runtime.settings import load_settings
@@ -555,3 +561,21 @@ def test_a_far_view_in_the_fall_window_moves_a_target_only_after_it() -> None:
     assert len(b.fall_views) == 1 and b.records[5].planned.centre_world_m[1] == 0.05
     b.update(scene(fruit(5, (0.70, 0.11, 1.20)), seq=13 * S), never)
     assert b.records[5].planned.centre_world_m[1] == pytest.approx(0.11)
+
+
+def test_a_new_track_holding_still_in_the_fall_window_is_a_fruit_on_the_tree() -> None:
+    # paper-exp1 seed 11: a hand left a fruit 16 cm from and 7 cm under a fruit cut 0.1 s
+    # before; its new track was left out for the whole window while the tools went for the
+    # old track where the fruit had hung. Held still for STILL_S, it is a fruit; one that
+    # falls (moving every frame) stays out for the window.
+    b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
+    b.update(scene(fruit(3, (0.586, -0.139, 1.311)), seq=1), never)
+    b.note_cut(3, 10 * S)
+    frames = [10 * S + (k + 1) * S // 15 for k in range(12)]  # 0.8 s
+    for k, t in enumerate(frames):
+        falling = fruit(40, (0.60, -0.10, 1.25 - 0.05 * k))
+        b.update(scene(fruit(37, (0.695, -0.02, 1.245)), falling, seq=t), never)
+    assert 40 not in b.id_to_key
+    first_in = min(t for t in frames if t - frames[0] >= STILL_S * S)
+    assert 37 in b.records and b.records[37].first_seen_ns == first_in
+    assert len([v for v in b.fall_views if v[1] == 37]) == frames.index(first_in)
