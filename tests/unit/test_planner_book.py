@@ -579,3 +579,21 @@ def test_a_new_track_holding_still_in_the_fall_window_is_a_fruit_on_the_tree() -
     first_in = min(t for t in frames if t - frames[0] >= STILL_S * S)
     assert 37 in b.records and b.records[37].first_seen_ns == first_in
     assert len([v for v in b.fall_views if v[1] == 37]) == frames.index(first_in)
+
+
+def test_the_scenes_echo_of_a_falling_fruits_view_makes_no_record() -> None:
+    # paper-exp2 seed 11: a view 0.7 s after a cut was left out, but the scene's stale entry of
+    # that ID the next state started a record, its kept echoes (the stored estimate) confirmed
+    # it, and the shears closed 60 cm from any peduncle. Only a view the scene estimates anew,
+    # not falling, makes that ID a fruit.
+    b = cut_after_a_harvest()
+    at = (0.70, 0.05, 1.20)
+    b.update(scene(fruit(31, at), seq=10 * S + S // 2), never)  # falling: left out
+    stale = fruit(31, at, unseen=1)
+    kept = fruit(31, at).model_copy(update={"flags": ("depth_inconsistent", "kept")})
+    b.update(scene(stale, seq=10 * S + S // 2 + S // 15), never)
+    for k in range(MIN_SIGHTINGS + 1):
+        b.update(scene(kept, seq=13 * S + k * S // 15), never)  # after the window
+    assert 31 not in b.id_to_key and b.candidates(45) == []
+    b.update(scene(fruit(31, at), seq=14 * S), never)
+    assert 31 in b.records
