@@ -38,10 +38,8 @@ class PhysicalFruit:
 
     def absorb(self, earlier: FruitRecord) -> None:
         """``earlier`` was an attempt at this fruit: its start, time and cuts count here."""
-        if self.started_ns is None or (
-            earlier.started_ns is not None and earlier.started_ns < self.started_ns
-        ):
-            self.started_ns = earlier.started_ns
+        starts = [t for t in (self.started_ns, earlier.started_ns) if t is not None]
+        self.started_ns = min(starts, default=None)
         self.spent_ns += earlier.spent_ns
         self.cuts += earlier.cuts
 
