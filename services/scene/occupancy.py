@@ -42,6 +42,10 @@ from services.robot.clearance import Capsule, axis_distances_m
 from services.scene.geometry import Pinhole, RigidTransform, vec3
 
 BLANK_WINDOW_PX = 3  # bark this near a voxel's pixel: the branch may still stand there
+# Kept depth cells (stride_px apart) either side of a new voxel's pixel searched for a view
+# behind it: one pixel alone is often a hole (the stereo shadow left of a near fruit, where a
+# hand then came: orchard seed 1, its thumb kept as a branch in the dish's way)
+THROUGH_WINDOW = 2
 SIGHT_SAMPLES = 150  # points along a line of sight (1.5 m at most: one a centimetre)
 
 
@@ -154,8 +158,11 @@ class OccupancyGrid:
                 continue
             u_px, v_px = K.project(c)
             u, v = round(u_px / s), round(v_px / s)
-            inside = 0 <= v < depth.shape[0] and 0 <= u < depth.shape[1]
-            if inside and depth[v, u] > c[2] + self.p.clear_margin_m:
+            w = THROUGH_WINDOW
+            if not (-w <= v < depth.shape[0] + w and -w <= u < depth.shape[1] + w):
+                continue
+            win = depth[max(v - w, 0) : v + w + 1, max(u - w, 0) : u + w + 1]
+            if (win > c[2] + self.p.clear_margin_m).any():
                 return True
         return False
 
