@@ -129,10 +129,6 @@ class SceneCore:
             else None
         )
         self.target: int | None = None  # the planner's current fruit (harvest/events)
-        # A planner drives the run (it sent an event): between its attempts no fruit is
-        # selected. The nearest-fruit rule would shrink the branches in some other fruit's
-        # working space while the arms go home (orchard seed 3: the cutter through two of them).
-        self.planner_seen = False
         self.cut_entry: Entry | None = None  # the target as it hung when the cut was sent
         self.body = RobotBody() if s.robot_self_filter else None
         self.joints: OrderedDict[int, JointState] = OrderedDict()  # stamp → joint state
@@ -202,7 +198,6 @@ class SceneCore:
             self.frames.popitem(last=False)
 
     def _take_event(self, ev: HarvestEvent) -> None:
-        self.planner_seen = True
         if ev.event == "run_finished":
             self.target, self.cut_entry = None, None
         if ev.fruit_id is None:
@@ -410,7 +405,7 @@ class SceneCore:
             selected_id: int | None = self.cut_entry.fruit_id
             selected: Entry | None = self.cut_entry
         else:
-            selected_id = self.fruits.selected(self.target, nearest=not self.planner_seen)
+            selected_id = self.fruits.selected(self.target)
             selected = self.fruits.entries.get(selected_id) if selected_id is not None else None
         fruits = tuple(self._fruit(e, selected_id) for e in entries)
         harvested = {k for k, m in self.fruits.marks.items() if m == "harvested"}

@@ -132,14 +132,12 @@ class FruitList:
         tools stopped 13 cm short of a fruit reached on another run and gave it up)."""
         self.marks.pop(fruit_id, None)
 
-    def selected(self, target: int | None = None, nearest: bool = True) -> int | None:
-        """The planner's current target when it is listed and unmarked; otherwise (``nearest``)
-        the nearest fruit (to the camera's optical centre) neither harvested nor unreachable
-        (the paper's rule), ties to the lower ID, or (not ``nearest``) none."""
+    def selected(self, target: int | None = None) -> int | None:
+        """The planner's current target when it is listed and unmarked; otherwise the nearest
+        fruit (to the camera's optical centre) neither harvested nor unreachable (the paper's
+        rule); ties go to the lower ID."""
         if target is not None and target in self.entries and target not in self.marks:
             return target
-        if not nearest:
-            return None
         free = [e for fid, e in self.entries.items() if fid not in self.marks]
         if not free:
             return None

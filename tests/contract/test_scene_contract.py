@@ -80,10 +80,9 @@ def test_scene_contract_on_sim_frames(sim_script: list[tuple[str, Any]]) -> None
     assert [f.fruit_id for f in first.fruits] == [1, 2]
     assert first.selected_fruit_id == 1 and first.fruits[0].status == "selected"
     assert first.trunk.found and first.obstacles.cylinders[0].name == "trunk"
-    # After the planner's event fruit 1 is harvested: not selected, no obstacle; between the
-    # planner's attempts no fruit is selected (the nearest rule is for a scene on its own).
-    assert last.selected_fruit_id is None
-    assert [f.status for f in last.fruits] == ["harvested", "candidate"]
+    # After the planner's event fruit 1 is harvested: not selected, no obstacle.
+    assert last.selected_fruit_id == 2
+    assert [f.status for f in last.fruits] == ["harvested", "selected"]
     assert [e.fruit_id for e in last.obstacles.ellipsoids] == [2]
 
 
@@ -242,14 +241,10 @@ def test_unreachable_fruit_stay_obstacles_and_are_never_selected() -> None:
         reason="no IK solution",
         outcome="unreachable",
     )
-    select_4 = HarvestEvent(
-        header=Header(stamp_ns=0, seq=1, source="planner"), event="fruit_selected", fruit_id=4
-    )
     script = [
         ("camera/rgbd", level_frame(0, s)),
         ("perception/tracks", tracks(0, 0, 0, {3: s.box(1), 4: s.box(2)})),
         ("harvest/events", ev),
-        ("harvest/events", select_4),
         ("perception/tracks", tracks(1, 0, 0, {3: s.box(1), 4: s.box(2)})),
     ]
     (a, b), _ = feed(script)

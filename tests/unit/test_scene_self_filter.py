@@ -121,22 +121,7 @@ def test_the_obstacle_radius_follows_the_planners_target() -> None:
     assert abs(st.obstacles.cylinders[0].radius_m - expected) < 1e-9
     done = ev.model_copy(update={"event": "fruit_collected", "outcome": "harvested"})
     core.handle("harvest/events", done)
-    st = step(4)
-    # Between the planner's attempts no fruit is selected (not the nearest: its working space
-    # would shrink the branches there while the arms go home), and the trunk is its own size.
-    assert st.selected_fruit_id is None and st.spheres_near_selected == ()
-    assert st.obstacles.cylinders[0].radius_m < expected
-    assert {f.status for f in st.fruits} == {"candidate", "harvested"}
-
-
-def test_without_a_planner_the_nearest_fruit_is_selected() -> None:
-    """The paper's rule, for the scene on its own (a camera and perception, no planner)."""
-    s = Scene()
-    s.ellipsoid((-0.1, 0.0, 0.5), a=0.04, c=0.04, label=1)
-    s.ellipsoid((0.1, 0.0, 0.8), a=0.04, c=0.04, label=2)
-    core = SceneCore(load_settings(Settings, {}))
-    assert _two_fruit_state(core, s, 1).selected_fruit_id == 1
-    assert _two_fruit_state(core, s, 2).selected_fruit_id == 1
+    assert step(4).selected_fruit_id == 1
 
 
 def test_a_target_on_a_harvested_fruits_id_is_the_target_again() -> None:
@@ -162,7 +147,7 @@ def test_a_target_on_a_harvested_fruits_id_is_the_target_again() -> None:
     event(2, "fruit_selected", 2)
     event(3, "fruit_collected", 2, "harvested")  # ID 2 now names the fruit that hung at 2
     st = step(4)
-    assert st.selected_fruit_id is None  # between attempts
+    assert st.selected_fruit_id == 1
     assert 2 not in {e.fruit_id for e in st.obstacles.ellipsoids}
     event(5, "fruit_selected", 2)  # the planner's book: ID 2 is on a fruit still to harvest
     st = step(6)
