@@ -9,10 +9,9 @@ import pytest
 
 from services.robot.clearance import axis_distances_m
 from services.runtime.settings import load_settings
-from services.scene import Settings
+from services.scene import Settings, occupancy
 from services.scene.core import SceneCore
 from services.scene.geometry import RigidTransform
-from services.scene import occupancy
 from services.scene.occupancy import OccupancyGrid, OccupancyParams
 from tests.scene_helpers import BARK, LEAF, LEVEL_POSE, R_WORLD_CAM, T_WORLD_CAM_M, K, Scene, tracks
 
