@@ -67,6 +67,7 @@ class FruitList:
         # Kept after an entry is forgotten (a harvested fruit seen again in the basket stays
         # harvested); cleared when the planner targets the ID again (``unmark``).
         self.marks: dict[int, Mark] = {}
+        self.moved: list[int] = []  # IDs whose confirmed jump was taken in the last step
 
     def step(
         self,
@@ -78,6 +79,7 @@ class FruitList:
         ``failed``: IDs detected without one (reason, e.g. depth_invalid). Returns notes (what
         was added, kept, forgotten) for the log."""
         notes: list[str] = []
+        self.moved = []
         seen = set(measured) | set(failed)
         for fid, m in sorted(measured.items()):
             e = self.entries.get(fid)
@@ -115,6 +117,7 @@ class FruitList:
         n = self.p.accept_jump_frames
         if n > 0 and len(e.jump) >= n:
             e.state, e.flags, e.jump = m, m.flags, []
+            self.moved.append(e.fruit_id)
             return [f"fruit {e.fruit_id} moved {jump:.3f} m (confirmed by {n} frames)"]
         e.flags = _flags(e.state.flags, "position_jump", "kept")
         return [f"fruit {e.fruit_id}: kept its state, new position {jump:.3f} m away"]

@@ -195,3 +195,51 @@ def _two_fruit_state(core: SceneCore, s: Scene, stamp: int) -> object:
     boxes = {1: s.box(1), 2: s.box(2)}
     ((_, state),) = core.handle("perception/tracks", tracks(stamp, stamp, stamp, boxes))
     return state
+
+
+def _harvested_id_moved(dish_at_new_place: bool) -> tuple[SceneCore, object]:
+    """Fruit 2 harvested; then its track ID is seen, frame after frame, on a fruit 15 cm to the
+    side (the tracker gave the ID to another fruit), with the arms at home: the scene state
+    once the list has taken the move. ``dish_at_new_place``: the dish's sphere put there."""
+    from schemas.harvest import HarvestEvent
+
+    before, after = Scene(), Scene()
+    for sc, x in ((before, 0.1), (after, 0.25)):
+        sc.ellipsoid((-0.1, 0.0, 0.5), a=0.04, c=0.04, label=1)
+        sc.ellipsoid((x, 0.0, 0.8), a=0.04, c=0.04, label=2)
+    core = SceneCore(load_settings(Settings, {"accept_jump_frames": 3}))
+    if dish_at_new_place:
+        new_world = T_WORLD_CAM_M + R_WORLD_CAM @ np.array([0.25, 0.0, 0.8])
+        home = RobotBody().capsules(HOME_RAD)
+        core._robot_at = lambda _stamp: (*home[:-1], (new_world, new_world, home[-1][2]))
+    stamp = 1000
+    core.handle("robot/joint_state", joint_state(stamp - 1))
+    _two_fruit_state(core, before, stamp)
+    for name, outcome in (("fruit_selected", None), ("fruit_collected", "harvested")):
+        h = Header(stamp_ns=stamp + 1, seq=0, source="planner")
+        ev = HarvestEvent(header=h, event=name, fruit_id=2, outcome=outcome)
+        core.handle("harvest/events", ev)
+    for k in range(1, 5):
+        core.handle("robot/joint_state", joint_state(stamp + 1000 * k - 1))
+        st = _two_fruit_state(core, after, stamp + 1000 * k)
+    return core, st
+
+
+def test_a_harvested_fruits_id_taken_to_another_fruit_is_no_longer_marked_harvested() -> None:
+    """The new fruit is an obstacle again (orchard seed 10: marked harvested, it was left out
+    of the dampers and a cutter link pressed on it for 2.9 s)."""
+    core, st = _harvested_id_moved(dish_at_new_place=False)
+    moved = {f.fruit_id: f for f in st.fruits}[2]
+    assert moved.position_world_m[1] < -0.2  # the list took the move (camera x → world −y)
+    assert moved.status != "harvested"
+    assert 2 in {e.fruit_id for e in st.obstacles.ellipsoids}
+    assert core.counters["harvested_id_moved_on"] == 1
+
+
+def test_a_harvested_fruits_id_that_moved_into_our_dish_stays_harvested() -> None:
+    core, st = _harvested_id_moved(dish_at_new_place=True)
+    moved = {f.fruit_id: f for f in st.fruits}[2]
+    assert moved.position_world_m[1] < -0.2
+    assert moved.status == "harvested"
+    assert 2 not in {e.fruit_id for e in st.obstacles.ellipsoids}
+    assert core.counters["harvested_id_moved_on"] == 0
