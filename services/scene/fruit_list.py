@@ -65,7 +65,8 @@ class FruitList:
         self.p = p
         self.entries: dict[int, Entry] = {}
         # Kept after an entry is forgotten (a harvested fruit seen again in the basket stays
-        # harvested); cleared when the planner targets the ID again (``unmark``).
+        # harvested); cleared when the planner targets the ID again (``unmark``), or by the
+        # core when a harvested ID's confirmed move (``moved``) put it on another fruit.
         self.marks: dict[int, Mark] = {}
         self.moved: list[int] = []  # IDs whose confirmed jump was taken in the last step
 
