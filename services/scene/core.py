@@ -493,14 +493,13 @@ class SceneCore:
         centre = st.position_world_m
         top = centre + np.array([0.0, 0.0, st.semi_axis_v_m + self.s.occupancy_inner_twig_m])
         inner_m = st.semi_axis_v_m + self.s.occupancy_inner_clearance_m
-        # the keep-out test of the sphere as shown (its surface at ``r`` within the capsule),
-        # not as inflated to the voxel: a branch 2-3 cm under a fruit's bottom, inside the
-        # dish's footprint, was left out whole and the dish ran into it (orchard seed 4)
+        # the occupancy grid's own keep-out test (a sphere's surface within the capsule), on
+        # the spheres already found near rather than a second pass over the whole grid
         return tuple(
             sp.model_copy(update={"radius_m": r})
             for sp in near
             if axis_distances_m(np.array(sp.center_world_m), [(centre, top, inner_m)])[0]
-            >= inner_m + r
+            >= inner_m + sp.radius_m
         )
 
     def _to_cam(self, p_world: np.ndarray) -> np.ndarray:
