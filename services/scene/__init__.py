@@ -171,6 +171,14 @@ class Settings(ServiceSettings):
         description="A position jump confirmed by this many consecutive frames is taken (the "
         "fruit really moved); 0 never takes one (the paper's rule).",
     )
+    unmark_moved_harvested: bool = Field(
+        default=False,
+        description="Opt-in: a harvested fruit's ID whose jump the list takes, to a place "
+        "outside our dish, is on another fruit: its harvested mark is dropped, so that fruit is "
+        "an obstacle again (orchard seed 10). Off by default: measured, the planner's book then "
+        "keeps the ID on a record that follows another fruit, and the run lost a fruit "
+        "(BENCHMARKS, Harvest, session 36).",
+    )
     # ---- the trunk (paper §III-C) ------------------------------------------------------------
     trunk_method: Literal["circle", "paper"] = Field(
         default="circle",

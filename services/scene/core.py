@@ -345,7 +345,9 @@ class SceneCore:
         old fruit's; kept, it hid the new fruit from the dampers (orchard seed 10: track 7 went
         from a harvested fruit to one 18 cm away, and a cutter link pressed on it for 2.9 s).
         A move into our dish is the harvested fruit itself: the mark stays, and also when the
-        dish is unknown (no joint state for the frame)."""
+        dish is unknown (no joint state for the frame). Opt-in (``unmark_moved_harvested``)."""
+        if not self.s.unmark_moved_harvested:
+            return
         for fid in self.fruits.moved:
             if self.fruits.marks.get(fid) != "harvested":
                 continue

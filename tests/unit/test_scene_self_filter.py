@@ -197,7 +197,7 @@ def _two_fruit_state(core: SceneCore, s: Scene, stamp: int) -> object:
     return state
 
 
-def _harvested_id_moved(dish_at_new_place: bool) -> tuple[SceneCore, object]:
+def _harvested_id_moved(dish_at_new_place: bool, opt_in: bool = True) -> tuple[SceneCore, object]:
     """Fruit 2 harvested; then its track ID is seen, frame after frame, on a fruit 15 cm to the
     side (the tracker gave the ID to another fruit), with the arms at home: the scene state
     once the list has taken the move. ``dish_at_new_place``: the dish's sphere put there."""
@@ -207,7 +207,8 @@ def _harvested_id_moved(dish_at_new_place: bool) -> tuple[SceneCore, object]:
     for sc, x in ((before, 0.1), (after, 0.25)):
         sc.ellipsoid((-0.1, 0.0, 0.5), a=0.04, c=0.04, label=1)
         sc.ellipsoid((x, 0.0, 0.8), a=0.04, c=0.04, label=2)
-    core = SceneCore(load_settings(Settings, {"accept_jump_frames": 3}))
+    settings = {"accept_jump_frames": 3, "unmark_moved_harvested": opt_in}
+    core = SceneCore(load_settings(Settings, settings))
     if dish_at_new_place:
         new_world = T_WORLD_CAM_M + R_WORLD_CAM @ np.array([0.25, 0.0, 0.8])
         home = RobotBody().capsules(HOME_RAD)
@@ -242,4 +243,12 @@ def test_a_harvested_fruits_id_that_moved_into_our_dish_stays_harvested() -> Non
     assert moved.position_world_m[1] < -0.2
     assert moved.status == "harvested"
     assert 2 not in {e.fruit_id for e in st.obstacles.ellipsoids}
+    assert core.counters["harvested_id_moved_on"] == 0
+
+
+def test_by_default_a_harvested_fruits_id_keeps_its_mark_when_it_moves() -> None:
+    core, st = _harvested_id_moved(dish_at_new_place=False, opt_in=False)
+    moved = {f.fruit_id: f for f in st.fruits}[2]
+    assert moved.position_world_m[1] < -0.2
+    assert moved.status == "harvested"
     assert core.counters["harvested_id_moved_on"] == 0
