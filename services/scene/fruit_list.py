@@ -66,7 +66,7 @@ class FruitList:
         self.entries: dict[int, Entry] = {}
         # Kept after an entry is forgotten (a harvested fruit seen again in the basket stays
         # harvested); cleared when the planner targets the ID again (``unmark``), or by the
-        # core when a harvested ID's confirmed move (``moved``) put it on another fruit.
+        # core, opt-in, when a harvested ID's confirmed move (``moved``) put it elsewhere.
         self.marks: dict[int, Mark] = {}
         self.moved: list[int] = []  # IDs whose confirmed jump was taken in the last step
 
