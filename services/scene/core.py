@@ -361,9 +361,7 @@ class SceneCore:
     @staticmethod
     def _in_dish(m: Measurement, dish: Capsule) -> bool:
         """The fruit's centre within the dish's sphere grown by its horizontal semi-axis."""
-        (centre, _b, radius) = dish
-        gap = float(np.linalg.norm(np.asarray(m.position_world_m) - np.asarray(centre)))
-        return gap < radius + m.semi_axis_h_m
+        return bool(axis_distances_m(m.position_world_m, (dish,))[0] < dish[2] + m.semi_axis_h_m)
 
     def _on_robot(self, m: Measurement, robot: tuple[Capsule, ...]) -> bool:
         radii = np.array([r for _a, _b, r in robot])
