@@ -168,6 +168,15 @@ class Settings(ServiceSettings):
         "are off by a few mm: any margin here blocked fruit that the arms do reach (a near miss "
         "costs a 'no progress' retry, not a collision: the controller's dampers keep d_s), m.",
     )
+    try_blocked_max_m: float = Field(
+        default=0.02,
+        ge=0,
+        description="When every fruit left is blocked by a neighbour and has waited once (two "
+        "fruit blocking each other, or behind one that stays), the one whose blockers' estimates "
+        "reach least into its tools' way is gone for once, if by no more than this, instead of "
+        "all being given up: the clutter check runs on estimates, the dampers on the scene keep "
+        "the tools off the fruit seen (a wrong guess is a stalled attempt, then final). 0: off, m.",
+    )
     defer_blocked: bool = Field(
         default=True,
         description="A fruit whose approach or harvest stops making progress is put back once "

@@ -134,6 +134,7 @@ class FruitRecord:
     attempt_ns: int | None = None  # start of the current attempt
     spent_ns: int = 0  # sim time the tools spent on it, over every attempt
     deferred: bool = False  # blocked once: retried when nothing else is left
+    tried_blocked: bool = False  # gone for once although blocked (``try_blocked_max_m``)
     cuts: int = 0
     aim_deeper_m: float = 0.0  # the poses aim this far beyond ``planned`` (a retried cut)
     losses: int = 0

@@ -52,37 +52,44 @@ def _to_segment_m(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
     return float(np.linalg.norm(p - (a + t * ab)))
 
 
-def blockers(
+def intrusions_m(
     target: FruitShape, others: Sequence[FruitShape], p: PoseSettings, clearance_m: float
-) -> list[int]:
-    """Indices of ``others`` closer than ``clearance_m`` to where the tools go for ``target``."""
+) -> list[float]:
+    """How far each of ``others`` reaches into where the tools go for ``target`` (the deepest
+    overlap of its sphere, grown by ``clearance_m``, with the dish or the cutter over the sweep),
+    m; 0 or less: clear of them. A second track of the target itself reads -inf."""
     h, q = harvest_pose(target, p), pre_pose(target, p)
     down = np.array([0.0, 0.0, 1.0])
     axis = p.camera_axis_world
     out = []
-    for i, f in enumerate(others):
+    for f in others:
         c = f.centre_world_m
         if same_fruit(f, target):
-            continue  # a second track of the target itself
+            out.append(-np.inf)  # a second track of the target itself
+            continue
         r = max(f.d_h_m, f.d_v_m) + clearance_m
-        hit = False
+        deepest = -np.inf
         for t in np.linspace(0.0, 1.0, SWEEP_SAMPLES):
             tip = q.tip_world_m + t * (h.tip_world_m - q.tip_world_m)
             below = q.basket_below_m + t * (h.basket_below_m - q.basket_below_m)
             back = q.basket_back_m + t * (h.basket_back_m - q.basket_back_m)
-            if _to_cylinder_m(c, tip - below * down - back * axis) < r:
-                hit = True
-                break
             flange = tip - SHAFT_M * axis
             wrist = flange - WRIST_M * axis
-            if _to_segment_m(c, tip, flange) < r + TOOLS.cutter_shaft_radius_m or (
-                _to_segment_m(c, flange, wrist) < r + LWR_LINK_RADIUS_M[-1]
-            ):
-                hit = True
-                break
-        if hit:
-            out.append(i)
+            deepest = max(
+                deepest,
+                r - _to_cylinder_m(c, tip - below * down - back * axis),
+                r + TOOLS.cutter_shaft_radius_m - _to_segment_m(c, tip, flange),
+                r + LWR_LINK_RADIUS_M[-1] - _to_segment_m(c, flange, wrist),
+            )
+        out.append(float(deepest))
     return out
+
+
+def blockers(
+    target: FruitShape, others: Sequence[FruitShape], p: PoseSettings, clearance_m: float
+) -> list[int]:
+    """Indices of ``others`` closer than ``clearance_m`` to where the tools go for ``target``."""
+    return [i for i, d in enumerate(intrusions_m(target, others, p, clearance_m)) if d > 0]
 
 
 def clearable(blocked_by: Mapping[int, Collection[int]]) -> set[int]:

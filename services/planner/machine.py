@@ -42,7 +42,7 @@ from schemas.scene import Fruit
 from services.planner import Settings
 from services.planner.book import FruitBook, FruitRecord
 from services.planner.branchcheck import BranchCheck
-from services.planner.clutter import blockers, clearable, same_fruit
+from services.planner.clutter import clearable, intrusions_m, same_fruit
 from services.planner.crowd import CrowdCheck, Crowding
 from services.planner.kinematics import Kinematics
 from services.planner.motion import ApproachPlanner
@@ -658,8 +658,40 @@ class Machine:
             if hidden:
                 names = ", ".join(f"#{b.fruit_id}" for b in hidden)
                 return Wait(f"#{first_blocked[0].fruit_id} waits for {names} (hidden)")
+            tried = self._try_through(cands)
+            if tried is not None:
+                return tried
             self._blocked(*first_blocked, now, wait=False)
         return None
+
+    def _try_through(self, cands: list[FruitRecord]) -> tuple[FruitRecord, str] | None:
+        """Every candidate is blocked and has waited: rather than give them all up, go once for
+        the one whose blockers reach least into its tools' way, if by no more than
+        ``try_blocked_max_m``. The clutter check runs on estimates of fruit that hide each other
+        (orchard seeds 7 and 9: two fruit blocking each other that the true shapes let through);
+        the controller's dampers keep the tools off every fruit in the scene, so a wrong guess
+        costs a stalled attempt (then final), not a collision. None: none qualifies."""
+        if self.s.try_blocked_max_m <= 0:
+            return None
+        best: tuple[float, float, FruitRecord, list[FruitRecord]] | None = None
+        for rec in cands:
+            if rec.tried_blocked:
+                continue
+            depths = self._blocker_depths(rec)
+            deepest = max(d for _, d in depths)
+            if deepest <= self.s.try_blocked_max_m and (
+                best is None or (deepest, rec.seen.distance_m) < best[:2]
+            ):
+                best = (deepest, rec.seen.distance_m, rec, [b for b, _ in depths])
+        if best is None:
+            return None
+        deepest, _, rec, blocking = best
+        rec.tried_blocked = True
+        names = ", ".join(f"#{b.fruit_id}" for b in blocking)
+        return rec, (
+            f"tried once although blocked by {names} (the estimates reach {deepest * 1e3:.0f} mm "
+            "into its tools' way, the least of the blocked fruit): the dampers decide"
+        )
 
     def _crowd_pick(
         self, rec: FruitRecord, cands: list[FruitRecord], now: int
@@ -825,14 +857,18 @@ class Machine:
 
     def _blockers(self, rec: FruitRecord) -> list[FruitRecord]:
         """Fruit on the tree (seen, not known to be off it) where the tools go for ``rec``."""
+        return [r for r, _ in self._blocker_depths(rec)]
+
+    def _blocker_depths(self, rec: FruitRecord) -> list[tuple[FruitRecord, float]]:
+        """The blockers of ``rec`` and how far each reaches into its tools' way, m."""
         present = self._on_tree(rec)
-        hit = blockers(
+        depths = intrusions_m(
             rec.planned,
             [r.planned for r in present],
             self.pose_settings,
             self.s.neighbour_clearance_m,
         )
-        return [present[i] for i in hit]
+        return [(r, d) for r, d in zip(present, depths, strict=True) if d > 0]
 
     def _blocked(self, rec: FruitRecord, blocking: list[FruitRecord], now: int, wait: bool) -> None:
         """``rec`` cannot be harvested now: wait for the others (once), or give it up."""

@@ -117,7 +117,7 @@ def test_planned_waits_for_a_blocker_deferred_after_a_stuck_attempt() -> None:
 def test_nearest_waits_for_a_hidden_blocker_then_gives_up_once_it_stays_away() -> None:
     # Orchard seed 15: A, deferred as blocked by B, was given up while the arms hid B; B
     # showed again 0.3 s later. Now the arms wait at the ready pose while B is hidden.
-    core = core_with("nearest", fruit(1, A, 0.5), fruit(2, B, 0.6))
+    core = core_with("nearest", fruit(1, A, 0.5), fruit(2, B, 0.6), try_blocked_max_m=0.0)
     core.book.records[1].deferred = True
     hidden_b = fruit(2, B, 0.6).model_copy(update={"frames_unseen": 50})  # past lost_after
     seen_at_ns = 3 * NS
@@ -145,7 +145,9 @@ def test_nearest_waits_for_a_hidden_blocker_then_gives_up_once_it_stays_away() -
 @pytest.mark.parametrize("order", ["nearest", "planned"])
 def test_fruit_blocking_each_other_are_given_up_and_the_free_one_taken(order: str) -> None:
     free = (0.70, -0.30, 1.30)
-    core = core_with(order, fruit(4, D, 0.5), fruit(5, E, 0.6), fruit(6, free, 0.7))
+    core = core_with(
+        order, fruit(4, D, 0.5), fruit(5, E, 0.6), fruit(6, free, 0.7), try_blocked_max_m=0.0
+    )
     assert select(core) == 6
     harvest(core, 6)
     assert select(core) is None
@@ -226,3 +228,38 @@ def test_the_controller_is_not_told_to_avoid_a_second_track_of_the_target_nor_a_
     assert m.goal().ignore == (7, 8)  # the ghost and the harvested fruit: never obstacles
     m.phase = "harvest"
     assert m.goal().ignore == (1, 7, 8, 11)  # the tools touch the target: all of its tracks
+
+
+def test_a_cycle_of_blockers_is_broken_by_going_once_for_the_least_blocked() -> None:
+    # D reaches 2.6 mm into E's tools' way, E 25 mm into D's (the estimates): E is gone for
+    # once instead of both being given up; harvested, it frees D.
+    free = (0.70, -0.30, 1.30)
+    core = core_with("nearest", fruit(4, D, 0.5), fruit(5, E, 0.6), fruit(6, free, 0.7))
+    assert select(core) == 6
+    harvest(core, 6)
+    assert select(core) == 5
+    m, recs = core.machine, core.book.records
+    assert recs[5].tried_blocked and not recs[4].finished
+    why = [e.reason for e in m.events if e.event == "fruit_selected"][-1]
+    assert "tried once although blocked by #4" in why and "3 mm" in why
+    harvest(core, 5)
+    assert select(core) == 4 and not recs[4].tried_blocked
+
+
+def test_a_fruit_gone_for_although_blocked_is_not_tried_twice() -> None:
+    # E's attempt through D failed (the stall path makes it final); D, 25 mm in, is past the
+    # limit: given up as before.
+    core = core_with("nearest", fruit(4, D, 0.5), fruit(5, E, 0.6))
+    assert select(core) == 5  # both waited once, then E is tried through
+    recs = core.book.records
+    recs[5].outcome = "unreachable"
+    assert select(core) is None
+    assert recs[4].outcome == "unreachable" and "blocked by #5" in recs[4].reason
+    assert not recs[4].tried_blocked
+
+
+def test_going_for_a_blocked_fruit_stops_at_the_limit() -> None:
+    core = core_with("nearest", fruit(4, D, 0.5), fruit(5, E, 0.6), try_blocked_max_m=0.002)
+    assert select(core) is None  # E's blocker reaches 2.6 mm in: over 2 mm
+    recs = core.book.records
+    assert recs[4].outcome == recs[5].outcome == "unreachable"
