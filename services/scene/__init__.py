@@ -321,6 +321,30 @@ class Settings(ServiceSettings):
         description="At most this many spheres (the most recently hit): the controller refuses "
         "scenes over its max_obstacles (500) with the fruit and the trunk.",
     )
+    occupancy_unseen_fruit: bool = Field(
+        default=False,
+        description="Also keep fruit-coloured depth points that no fruit estimate explains (a "
+        "fruit behind leaves the detector misses: orchard seed 18's collecting arm touched two "
+        "such, 6-13 % visible, 35 times) in a second voxel grid with the same settings, "
+        "published as sphere obstacles 'unseen_fruit_…' beside the branches'. Points within "
+        "a fruit estimate's largest semi-axis plus occupancy_unseen_fruit_margin_m of its centre "
+        "(harvested ones aside: the dish's own sphere filters those) are that fruit's.",
+    )
+    occupancy_unseen_fruit_margin_m: float = Field(
+        default=0.03,
+        ge=0,
+        le=0.2,
+        description="See occupancy_unseen_fruit: an estimate explains the fruit-coloured points "
+        "within its largest semi-axis plus this of its centre (the estimates of partly hidden "
+        "fruit are a few cm off), m.",
+    )
+    occupancy_unseen_fruit_max_obstacles: int = Field(
+        default=60,
+        ge=0,
+        le=200,
+        description="At most this many unseen-fruit spheres (the most recently hit); with "
+        "occupancy_max_obstacles and the fruit they stay under the controller's 500.",
+    )
     occupancy_target_clearance_m: float = Field(
         default=0.2,
         ge=0,

@@ -104,28 +104,31 @@ class SceneCore:
                 s.trunk_forget_after_frames,
             )
         )
-        self.occupancy = (
+        params = OccupancyParams(
+            voxel_m=s.occupancy_voxel_m,
+            sphere_radius_m=s.occupancy_sphere_radius_m,
+            stride_px=s.occupancy_stride_px,
+            max_depth_m=s.occupancy_max_depth_m,
+            min_points=s.occupancy_min_points,
+            robot_margin_m=s.occupancy_robot_margin_m,
+            clear_frames=s.occupancy_clear_frames,
+            clear_margin_m=s.occupancy_clear_margin_m,
+            forget_after_frames=s.occupancy_forget_after_frames,
+            max_obstacles=s.occupancy_max_obstacles,
+            history_frames=s.occupancy_history_frames,
+            history_every_frames=s.occupancy_history_every_frames,
+            history_long_frames=s.occupancy_history_long_frames,
+            transient_forget_frames=s.occupancy_transient_forget_frames,
+            settle_hits=s.occupancy_settle_hits,
+            blank_frames=s.occupancy_blank_frames,
+        )
+        self.occupancy = OccupancyGrid(params) if s.occupancy else None
+        self.unseen = (
             OccupancyGrid(
-                OccupancyParams(
-                    voxel_m=s.occupancy_voxel_m,
-                    sphere_radius_m=s.occupancy_sphere_radius_m,
-                    stride_px=s.occupancy_stride_px,
-                    max_depth_m=s.occupancy_max_depth_m,
-                    min_points=s.occupancy_min_points,
-                    robot_margin_m=s.occupancy_robot_margin_m,
-                    clear_frames=s.occupancy_clear_frames,
-                    clear_margin_m=s.occupancy_clear_margin_m,
-                    forget_after_frames=s.occupancy_forget_after_frames,
-                    max_obstacles=s.occupancy_max_obstacles,
-                    history_frames=s.occupancy_history_frames,
-                    history_every_frames=s.occupancy_history_every_frames,
-                    history_long_frames=s.occupancy_history_long_frames,
-                    transient_forget_frames=s.occupancy_transient_forget_frames,
-                    settle_hits=s.occupancy_settle_hits,
-                    blank_frames=s.occupancy_blank_frames,
-                )
+                dataclasses.replace(params, max_obstacles=s.occupancy_unseen_fruit_max_obstacles),
+                prefix="unseen_fruit_",
             )
-            if s.occupancy
+            if s.occupancy and s.occupancy_unseen_fruit
             else None
         )
         self.target: int | None = None  # the planner's current fruit (harvest/events)
@@ -303,6 +306,26 @@ class SceneCore:
         if self.occupancy is not None:
             # Bark-coloured points are the trunk and the branches (the trunk's own mask).
             self.occupancy.step(mask, depth_m, K, T, robot_all)
+        if self.unseen is not None:
+            self.unseen.step(self._fruit_mask(hsv), depth_m, K, T, robot_all, self._explained())
+
+    def _fruit_mask(self, hsv: np.ndarray) -> np.ndarray:
+        lo, hi = np.array(self.s.fruit_hsv_low), np.array(self.s.fruit_hsv_high)
+        return np.asarray(((hsv >= lo) & (hsv <= hi)).all(axis=2), dtype=bool)
+
+    def _explained(self) -> tuple[np.ndarray, np.ndarray]:
+        """The fruit estimates as spheres (centres, radii; m) that explain fruit-coloured
+        points: every entry but the harvested (off the tree; the dish's sphere filters them)."""
+        es = [
+            e
+            for e in self.fruits.entries.values()
+            if self.fruits.marks.get(e.fruit_id) != "harvested"
+        ]
+        centres = np.array([e.state.position_world_m for e in es], dtype=float).reshape(-1, 3)
+        radii = np.array(
+            [max(e.state.semi_axis_h_m, e.state.semi_axis_v_m) for e in es], dtype=float
+        )
+        return centres, radii + self.s.occupancy_unseen_fruit_margin_m
 
     def _measurement(self, fid: int, est: FruitEstimate, T: RigidTransform) -> Measurement:
         flags: list[FruitFlag] = []
@@ -445,8 +468,10 @@ class SceneCore:
         near: tuple[SphereObstacle, ...] = ()
         if self.occupancy is not None:
             keep_out = self._keep_out(selected)
-            near = self.occupancy.within(*keep_out)
-            spheres = self.occupancy.obstacles(*keep_out) + self._near_shown(selected, near)
+            grids = [g for g in (self.occupancy, self.unseen) if g is not None]
+            near = tuple(sp for g in grids for sp in g.within(*keep_out))
+            spheres = tuple(sp for g in grids for sp in g.obstacles(*keep_out))
+            spheres += self._near_shown(selected, near)
             obstacles = obstacles.model_copy(update={"spheres": spheres})
         return SceneState(
             header=self.stamper.answer(TOPIC_OUT, tracks.header, frame_id="world"),

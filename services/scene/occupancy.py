@@ -93,6 +93,7 @@ class OccupancyGrid:
     """Persistent voxel grid of bark-coloured points (world frame); ``step`` once per frame."""
 
     p: OccupancyParams
+    prefix: str = ""  # of its spheres' names: two grids' spheres never share a name
     voxels: dict[tuple[int, int, int], Voxel] = field(default_factory=dict)
     frame: int = 0
     # the last history_frames frames' depth (every stride_px-th pixel) with their camera, and
@@ -107,9 +108,12 @@ class OccupancyGrid:
         K: Pinhole,
         T: RigidTransform,
         robot: Sequence[Capsule],
+        explained: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> None:
         """Take one frame: ``mask`` (H, W) bark-coloured pixels, ``depth_m`` (H, W) depth in m
-        (0 / NaN / inf: invalid), the camera ``K`` and pose ``T``, the robot's capsules."""
+        (0 / NaN / inf: invalid), the camera ``K`` and pose ``T``, the robot's capsules.
+        ``explained``: world spheres (centres (N, 3), radii (N,), m) whose points are something
+        else's; their points are left out and the voxels inside them forgotten."""
         self.frame += 1
         measured = np.isfinite(depth_m) & (depth_m > 0)
         valid = measured & (depth_m <= self.p.max_depth_m)
@@ -121,11 +125,22 @@ class OccupancyGrid:
         pts = _points_world(mask & valid, depth_m, K, T, self.p.stride_px)
         if robot and len(pts):
             pts = pts[~_near_robot(pts, robot, self.p.robot_margin_m)]
+        if explained is not None and len(explained[1]):
+            pts = pts[~_inside_any(pts, *explained)]
+            self._forget_inside(*explained)
         self._hit(pts)
         old = [k for k, v in self.voxels.items() if self._expired(v)]
         for k in old:
             del self.voxels[k]
         self._remember(depth_m, measured, K, T)
+
+    def _forget_inside(self, centres_m: np.ndarray, radii_m: np.ndarray) -> None:
+        if not self.voxels:
+            return
+        keys = list(self.voxels)
+        inside = _inside_any(np.array([self.voxels[k].center_m for k in keys]), centres_m, radii_m)
+        for i in np.flatnonzero(inside).tolist():
+            del self.voxels[keys[i]]
 
     def _remember(
         self, depth_m: np.ndarray, measured: np.ndarray, K: Pinhole, T: RigidTransform
@@ -312,7 +327,7 @@ class OccupancyGrid:
             kept.append((-vox.last_hit_frame, key, c))
         kept.sort(key=lambda t: (t[0], t[1]))
         return tuple(
-            SphereObstacle(name=f"{name}_{i}", center_world_m=vec3(c), radius_m=r)
+            SphereObstacle(name=f"{self.prefix}{name}_{i}", center_world_m=vec3(c), radius_m=r)
             for i, (_f, _k, c) in enumerate(kept[: self.p.max_obstacles])
         )
 
@@ -351,6 +366,14 @@ def _sight_blocked(cam: np.ndarray, targets: np.ndarray, robot: Sequence[Capsule
     pts = cam + (targets[:, None, :] - cam) * t[None, :, None]  # (N, S, 3)
     near = _near_robot(pts.reshape(-1, 3), robot, 0.0).reshape(len(targets), -1)
     return np.asarray(near.any(axis=1), dtype=bool)
+
+
+def _inside_any(pts: np.ndarray, centres_m: np.ndarray, radii_m: np.ndarray) -> np.ndarray:
+    """(N,) points inside any of the spheres (centres (M, 3), radii (M,))."""
+    if not len(pts):
+        return np.zeros(0, dtype=bool)
+    d = np.linalg.norm(pts[:, None, :] - centres_m[None, :, :], axis=2)
+    return np.asarray((d < radii_m[None, :]).any(axis=1), dtype=bool)
 
 
 def _near_robot(pts: np.ndarray, robot: Sequence[Capsule], margin_m: float) -> np.ndarray:
