@@ -514,8 +514,27 @@ def _fates(
     records: dict[int, Any], reachable: list[int], collected: set[int], truth: GroundTruth
 ) -> dict[str, int]:
     """How many reachable fruit ended in each fate (every key of FATES, zeros included)."""
-    visible = {f.fruit_id: f.visible_fraction for f in truth.fruits}
     out = dict.fromkeys(FATES, 0)
+    for row in _reachable_rows(records, reachable, collected, truth):
+        out[row["fate"]] += 1
+    return out
+
+
+def _reachable_lost(
+    records: dict[int, Any], reachable: list[int], collected: set[int], truth: GroundTruth
+) -> list[dict[str, Any]]:
+    """The reachable fruit not harvested, one row each: the sim's fruit, the planner's track ID
+    (None: never detected), the fate and the record's reason (diagnosis)."""
+    return [
+        r for r in _reachable_rows(records, reachable, collected, truth) if r["fate"] != "harvested"
+    ]
+
+
+def _reachable_rows(
+    records: dict[int, Any], reachable: list[int], collected: set[int], truth: GroundTruth
+) -> list[dict[str, Any]]:
+    visible = {f.fruit_id: f.visible_fraction for f in truth.fruits}
+    rows = []
     for i in reachable:
         r = records.get(i)
         if i in collected:
@@ -524,8 +543,15 @@ def _fates(
             fate = fate_of(None, "", visible[i])
         else:
             fate = fate_of(r.outcome, r.reason, visible[i])
-        out[fate] += 1
-    return out
+        rows.append(
+            {
+                "fruit": i,
+                "track": r.fruit_id if r is not None else None,
+                "fate": fate,
+                "reason": r.reason if r is not None else "",
+            }
+        )
+    return rows
 
 
 def retraces(events: Sequence[Any]) -> dict[str, int]:
@@ -649,6 +675,7 @@ def evaluate(got: Collected, first_truth: GroundTruth, judged: Truth) -> dict[st
         "max_velocity_ratio": round(got.max_velocity_ratio, 4),
         "cycles_s": [round(c, 3) for c in cycles],
         "reachable_fates": _fates(record, reachable, collected, first_truth),
+        "reachable_lost": _reachable_lost(record, reachable, collected, first_truth),
         **retraces(got.harvest_events),
         **approach_plans(got.harvest_events),
         **crowd_picks(got.harvest_events),

@@ -3,6 +3,8 @@ the planner itself writes, so these tests take the reasons from a real planner c
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import pytest
 
 from schemas.base import Header
@@ -41,7 +43,9 @@ def test_a_stalled_approach_is_told_apart() -> None:
 
 def test_blocked_and_out_of_reach_are_told_apart() -> None:
     # C is free, B blocks A; B given up → A is unreachable, blocked by B.
-    core = core_with("nearest", fruit(1, A, 0.5), fruit(2, B, 0.6), fruit(3, C, 0.7))
+    core = core_with(
+        "nearest", fruit(1, A, 0.5), fruit(2, B, 0.6), fruit(3, C, 0.7), try_blocked_max_m=0.0
+    )
     core.book.records[2].outcome = "unreachable"
     core.book.records[3].outcome = "harvested"
     core.machine._select(0)
@@ -53,6 +57,26 @@ def test_blocked_and_out_of_reach_are_told_apart() -> None:
     core.machine._select(0)
     a = core.book.records[1]
     assert bench.fate_of(a.outcome, a.reason, 1.0) == "out_of_reach"
+
+
+def test_the_lost_reachable_fruit_are_listed_with_track_fate_and_reason() -> None:
+    core = core_with(
+        "nearest", fruit(1, A, 0.5), fruit(2, B, 0.6), fruit(3, C, 0.7), try_blocked_max_m=0.0
+    )
+    recs = core.book.records
+    recs[2].outcome = "unreachable"
+    recs[3].outcome = "harvested"
+    core.machine._select(0)
+    truth = SimpleNamespace(
+        fruits=[SimpleNamespace(fruit_id=i, visible_fraction=0.5) for i in (10, 11, 12, 13)]
+    )
+    # sim fruit 10 is track 1 (blocked), 11 track 3 (collected), 12 never detected; 13 unreachable
+    lost = bench._reachable_lost({10: recs[1], 11: recs[3]}, [10, 11, 12], {11}, truth)
+    assert [(r["fruit"], r["track"], r["fate"]) for r in lost] == [
+        (10, 1, "blocked"),
+        (12, None, "not_detected"),
+    ]
+    assert "blocked by #2" in lost[0]["reason"] and lost[1]["reason"] == ""
 
 
 @pytest.mark.parametrize(

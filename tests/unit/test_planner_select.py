@@ -234,7 +234,9 @@ def test_a_cycle_of_blockers_is_broken_by_going_once_for_the_least_blocked() -> 
     # D reaches 2.6 mm into E's tools' way, E 25 mm into D's (the estimates): E is gone for
     # once instead of both being given up; harvested, it frees D.
     free = (0.70, -0.30, 1.30)
-    core = core_with("nearest", fruit(4, D, 0.5), fruit(5, E, 0.6), fruit(6, free, 0.7))
+    core = core_with(
+        "nearest", fruit(4, D, 0.5), fruit(5, E, 0.6), fruit(6, free, 0.7), try_blocked_max_m=0.02
+    )
     assert select(core) == 6
     harvest(core, 6)
     assert select(core) == 5
@@ -249,7 +251,7 @@ def test_a_cycle_of_blockers_is_broken_by_going_once_for_the_least_blocked() -> 
 def test_a_fruit_gone_for_although_blocked_is_not_tried_twice() -> None:
     # E's attempt through D failed (the stall path makes it final); D, 25 mm in, is past the
     # limit: given up as before.
-    core = core_with("nearest", fruit(4, D, 0.5), fruit(5, E, 0.6))
+    core = core_with("nearest", fruit(4, D, 0.5), fruit(5, E, 0.6), try_blocked_max_m=0.02)
     assert select(core) == 5  # both waited once, then E is tried through
     recs = core.book.records
     recs[5].outcome = "unreachable"
