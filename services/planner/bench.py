@@ -510,29 +510,19 @@ def fate_of(outcome: str | None, reason: str, visible_share: float) -> str:
     return "other"
 
 
-def _fates(
-    records: dict[int, Any], reachable: list[int], collected: set[int], truth: GroundTruth
-) -> dict[str, int]:
+def _fates(rows: list[dict[str, Any]]) -> dict[str, int]:
     """How many reachable fruit ended in each fate (every key of FATES, zeros included)."""
     out = dict.fromkeys(FATES, 0)
-    for row in _reachable_rows(records, reachable, collected, truth):
+    for row in rows:
         out[row["fate"]] += 1
     return out
-
-
-def _reachable_lost(
-    records: dict[int, Any], reachable: list[int], collected: set[int], truth: GroundTruth
-) -> list[dict[str, Any]]:
-    """The reachable fruit not harvested, one row each: the sim's fruit, the planner's track ID
-    (None: never detected), the fate and the record's reason (diagnosis)."""
-    return [
-        r for r in _reachable_rows(records, reachable, collected, truth) if r["fate"] != "harvested"
-    ]
 
 
 def _reachable_rows(
     records: dict[int, Any], reachable: list[int], collected: set[int], truth: GroundTruth
 ) -> list[dict[str, Any]]:
+    """One row per reachable fruit: the sim's fruit, the planner's track ID (None: never
+    detected), its fate and the record's reason (diagnosis)."""
     visible = {f.fruit_id: f.visible_fraction for f in truth.fruits}
     rows = []
     for i in reachable:
@@ -648,6 +638,7 @@ def evaluate(got: Collected, first_truth: GroundTruth, judged: Truth) -> dict[st
         if r.outcome == "harvested" and r.duration_s is not None
     ]
     harvested_reachable = len(collected & set(reachable))
+    fates = _reachable_rows(record, reachable, collected, first_truth)
     reachable_ik = {i for i, ok in judged.reachable_ik.items() if ok}
     counters = last.counters if last is not None else None
     return {
@@ -674,8 +665,8 @@ def evaluate(got: Collected, first_truth: GroundTruth, judged: Truth) -> dict[st
         "commands_clamped": counters.commands_clamped if counters is not None else None,
         "max_velocity_ratio": round(got.max_velocity_ratio, 4),
         "cycles_s": [round(c, 3) for c in cycles],
-        "reachable_fates": _fates(record, reachable, collected, first_truth),
-        "reachable_lost": _reachable_lost(record, reachable, collected, first_truth),
+        "reachable_fates": _fates(fates),
+        "reachable_lost": [r for r in fates if r["fate"] != "harvested"],
         **retraces(got.harvest_events),
         **approach_plans(got.harvest_events),
         **crowd_picks(got.harvest_events),

@@ -59,7 +59,7 @@ class SceneCore:
 
         try:
             self.trunk_hsv = HsvBox(s.trunk_hsv_low, s.trunk_hsv_high)
-            HsvBox(s.fruit_hsv_low, s.fruit_hsv_high)
+            self.fruit_hsv = HsvBox(s.fruit_hsv_low, s.fruit_hsv_high)
         except ValueError as exc:
             raise ConfigError(str(exc)) from None
         if s.min_semi_axis_m >= s.max_semi_axis_m:
@@ -307,11 +307,7 @@ class SceneCore:
             # Bark-coloured points are the trunk and the branches (the trunk's own mask).
             self.occupancy.step(mask, depth_m, K, T, robot_all)
         if self.unseen is not None:
-            self.unseen.step(self._fruit_mask(hsv), depth_m, K, T, robot_all, self._explained())
-
-    def _fruit_mask(self, hsv: np.ndarray) -> np.ndarray:
-        lo, hi = np.array(self.s.fruit_hsv_low), np.array(self.s.fruit_hsv_high)
-        return np.asarray(((hsv >= lo) & (hsv <= hi)).all(axis=2), dtype=bool)
+            self.unseen.step(self.fruit_hsv.mask(hsv), depth_m, K, T, robot_all, self._explained())
 
     def _explained(self) -> tuple[np.ndarray, np.ndarray]:
         """The fruit estimates as spheres (centres, radii; m) that explain fruit-coloured

@@ -24,6 +24,13 @@ class HsvBox:
         if any(lo > hi for lo, hi in zip(self.low, self.high, strict=True)):
             raise ValueError(f"HsvBox low {self.low} exceeds high {self.high}")
 
+    def mask(self, hsv_img: np.ndarray) -> np.ndarray:
+        """Boolean (H, W): the pixels of an OpenCV HSV image (H, W, 3) uint8 inside the box."""
+        import cv2
+
+        lo, hi = np.array(self.low, np.uint8), np.array(self.high, np.uint8)
+        return np.asarray(cv2.inRange(hsv_img, lo, hi) > 0)
+
 
 PAPER_TRUNK_HSV = HsvBox(low=(10, 70, 80), high=(20, 130, 140))
 """The paper's trunk colour thresholds: H 10-20, S 70-130, V 80-140 (OpenCV ranges)."""
@@ -56,7 +63,7 @@ def hsv_depth_mask(
     if depth_unit_m <= 0 or max_depth_m <= 0:
         raise ValueError(f"depth_unit_m and max_depth_m must be > 0: {depth_unit_m}, {max_depth_m}")
     hsv_img = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)
-    colour = cv2.inRange(hsv_img, np.array(hsv.low, np.uint8), np.array(hsv.high, np.uint8)) > 0
+    colour = hsv.mask(hsv_img)
     max_count = int(np.floor(max_depth_m / depth_unit_m + 1e-9))
     near = (depth > 0) & (depth <= max_count)
     mask: np.ndarray = colour & near
