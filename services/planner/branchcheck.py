@@ -48,21 +48,30 @@ from services.planner.poses import FruitShape, ToolPoses
 
 TOOL_JOINTS = ("cutter_j7", "collector_j7")  # the bodies they carry are measured
 START_S = 0.5  # spheres first listed this soon after the first scene state were there at start
+UNSEEN_FRUIT_PREFIX = "unseen_fruit_"  # the scene's names for fruit-coloured occupied space
 
 
 @dataclass(frozen=True)
 class BranchVerdict:
     """``clear``, or the first pose (``pose``) whose clearest IK solution puts a tool
-    ``depth_m`` into the occupied spheres (of ``solutions`` solutions)."""
+    ``depth_m`` into the occupied spheres (of ``solutions`` solutions), deepest into the
+    sphere named ``sphere``."""
 
     clear: bool
     pose: str = ""
     depth_m: float = 0.0
     solutions: int = 0
+    sphere: str = ""
 
     def why(self) -> str:
+        # The scene's unseen-fruit spheres are fruit no estimate explains, not branches.
+        what = (
+            "a fruit the detector has not found"
+            if self.sphere.startswith(UNSEEN_FRUIT_PREFIX)
+            else "a branch"
+        )
         return (
-            f"a branch in the tools' way at the {self.pose} (the clearest of {self.solutions} "
+            f"{what} in the tools' way at the {self.pose} (the clearest of {self.solutions} "
             f"IK solutions puts a tool {self.depth_m * 1e3:.0f} mm into the occupied space seen)"
         )
 
@@ -144,17 +153,28 @@ class BranchCheck:
             sols = kin.solutions(pose.tip_world_m, pose.basket_below_m)
             if not sols:
                 continue  # out of reach: the IK check says so
-            depth = min(self.tool_depth_m(s.q_rad) for s in sols)
+            depth, sphere = min(self._deepest(s.q_rad, spheres) for s in sols)
             if depth > self.depth_m:
-                return BranchVerdict(False, name, depth, len(sols))
+                return BranchVerdict(False, name, depth, len(sols), sphere)
         return BranchVerdict(True)
 
     def tool_depth_m(self, q_rad: np.ndarray) -> float:
         """How deep the deepest tool body goes into the spheres at ``q_rad`` (0: clear), m."""
+        return self._deepest(q_rad, ())[0]
+
+    def _deepest(self, q_rad: np.ndarray, spheres: tuple[SphereObstacle, ...]) -> tuple[float, str]:
+        """The depth of ``tool_depth_m`` and the name of the sphere of ``spheres`` (those set)
+        whose surface lies nearest the deepest pair's obstacle point ("" if clear or none)."""
         space = self.space
         space.robot.set_q(q_rad)
         rep = space.engine.compute(space.obstacles, {"branch": 0.0})
-        depths = [
-            -p.distance_m for p in rep.pairs if p.kind == "branch" and p.joint1 in self.tool_joints
-        ]
-        return max(depths, default=0.0)
+        pairs = [p for p in rep.pairs if p.kind == "branch" and p.joint1 in self.tool_joints]
+        deepest = max(pairs, key=lambda p: -p.distance_m, default=None)
+        if deepest is None or deepest.distance_m >= 0.0:
+            return 0.0, ""
+        if not spheres:
+            return -deepest.distance_m, ""
+        centres = np.array([s.center_world_m for s in spheres])
+        radii = np.array([s.radius_m for s in spheres])
+        gap_m = np.abs(np.linalg.norm(centres - deepest.p2_world_m, axis=1) - radii)
+        return -deepest.distance_m, spheres[int(np.argmin(gap_m))].name

@@ -69,6 +69,10 @@ class OccupancyParams:
     transient_forget_frames: int = 5
     settle_hits: int = 45
     blank_frames: int = 15
+    # Voxels whose centre comes this near the robot's capsules are forgotten (None: kept). For
+    # the unseen-fruit grid: the arms and the dish are fruit-coloured, so a frame without the
+    # joint state to filter them leaves voxels on the robot that no later view clears.
+    forget_in_robot_m: float | None = None
 
 
 @dataclass
@@ -125,6 +129,8 @@ class OccupancyGrid:
         pts = _points_world(mask & valid, depth_m, K, T, self.p.stride_px)
         if robot and len(pts):
             pts = pts[~_near_robot(pts, robot, self.p.robot_margin_m)]
+        if robot and self.p.forget_in_robot_m is not None:
+            self._forget_in_robot(robot, self.p.forget_in_robot_m)
         if explained is not None and len(explained[1]):
             pts = pts[~_inside_any(pts, *explained)]
             self._forget_inside(*explained)
@@ -140,6 +146,14 @@ class OccupancyGrid:
         keys = list(self.voxels)
         inside = _inside_any(np.array([self.voxels[k].center_m for k in keys]), centres_m, radii_m)
         for i in np.flatnonzero(inside).tolist():
+            del self.voxels[keys[i]]
+
+    def _forget_in_robot(self, robot: Sequence[Capsule], margin_m: float) -> None:
+        if not self.voxels:
+            return
+        keys = list(self.voxels)
+        near = _near_robot(np.array([self.voxels[k].center_m for k in keys]), robot, margin_m)
+        for i in np.flatnonzero(near).tolist():
             del self.voxels[keys[i]]
 
     def _remember(

@@ -12,6 +12,7 @@ import pytest
 
 from schemas.base import Header
 from schemas.scene import Obstacles, SceneState, SphereObstacle, Trunk
+from services.planner.bench import fate_of
 from services.planner.branchcheck import BranchCheck
 from services.planner.core import PlannerCore
 from services.planner.poses import harvest_pose
@@ -78,6 +79,27 @@ def test_a_branch_where_the_dish_goes_defers_the_fruit_then_refuses_it(
     assert select(core) is None  # only fruit 1 is left, and the branch is still there
     assert rec.outcome == "unreachable" and rec.finished
     assert skips(core, 1)[1].startswith("unreachable: a branch in the tools' way")
+
+
+def test_an_unseen_fruit_in_the_way_is_named_as_such() -> None:
+    """The scene's unseen-fruit spheres (fruit-coloured space no estimate explains) refuse a
+    fruit as branches do, and the reason says which it was; the bench counts it apart."""
+    core = checking()
+    assert core.machine.branches is not None
+    at = dish_level(core)
+    hidden = (SphereObstacle(name="unseen_fruit_0", center_world_m=tuple(at), radius_m=0.04),)
+    far = branch(at + np.array([0, 0, -0.5]))  # a branch well clear: the fruit is named
+    core.machine.branches.set_scene(scene(hidden + far))
+    assert select(core) == 3
+    (first,) = skips(core, 1)
+    assert first.startswith("blocked: a fruit the detector has not found in the tools' way")
+    core.book.records[3].outcome = "harvested"
+    assert select(core) is None
+    final = skips(core, 1)[1]
+    assert fate_of("unreachable", final, 1.0) == "unseen_fruit_refused"
+    assert fate_of("unreachable", "unreachable: a branch in the tools' way", 1.0) == (
+        "branch_refused"
+    )
 
 
 def test_what_was_gone_at_the_second_look_is_harvested() -> None:

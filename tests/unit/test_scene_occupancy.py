@@ -4,6 +4,8 @@ leaves and broken depth frames do not create (or wipe) any."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -14,6 +16,7 @@ from services.scene.core import SceneCore
 from services.scene.geometry import RigidTransform
 from services.scene.occupancy import OccupancyGrid, OccupancyParams
 from tests.scene_helpers import BARK, LEAF, LEVEL_POSE, R_WORLD_CAM, T_WORLD_CAM_M, K, Scene, tracks
+from tests.unit.test_scene_self_filter import joint_state
 
 T = RigidTransform.of(LEVEL_POSE)
 P = OccupancyParams(voxel_m=0.04, sphere_radius_m=0.03, stride_px=2, clear_frames=3)
@@ -435,3 +438,43 @@ def test_unseen_fruit_spheres_go_once_an_estimate_explains_them() -> None:
         (out,) = core.handle("perception/tracks", tracks(k, 1000 * (k + 1), k, boxes))
         states.append(out[1])
     assert states[3].obstacles.spheres and states[-1].obstacles.spheres == ()
+
+
+def test_voxels_where_the_robot_now_stands_are_forgotten_when_asked() -> None:
+    # The unseen-fruit grid's case: the orange arm seen in a frame without its joint state
+    # leaves voxels on it; the next frame's capsules show the robot there (orchard seed 13:
+    # such spheres on the cutter at home stalled its first approach for 14 s).
+    sc = branch_scene()
+    lo, hi = strip_world_box()
+    mid = (lo + hi) / 2
+    capsule = (mid.copy(), np.array([mid[0], mid[1], hi[2] + 0.1]), 0.03)  # the upper half
+    blank = np.zeros_like(bark_mask(sc))
+    kept = {}
+    for margin in (None, 0.01):
+        grid = OccupancyGrid(dataclasses.replace(P, forget_in_robot_m=margin))
+        grid.step(bark_mask(sc), sc.depth, K, T, ())  # no capsules: the link's points count
+        before = len(grid.voxels)
+        grid.step(blank, sc.depth, K, T, (capsule,))
+        kept[margin] = (before, centres(grid))
+    before, c = kept[None]
+    assert len(c) == before  # the bark grid keeps them (a branch the tool touches)
+    before, c = kept[0.01]
+    assert 0 < len(c) < before, "the lower half stays"
+    assert all(float(axis_distances_m(p, [capsule])[0]) >= 0.03 + 0.01 for p in c)
+
+
+def test_no_joint_state_no_unseen_fruit_from_that_frame() -> None:
+    # The self-filter on and no joint state for a frame: its fruit colour may be the arms.
+    sc = Scene()
+    sc.ellipsoid((0.25, 0.0, 0.7), 0.04, 0.045, label=2)
+    on = {"robot_self_filter": True, "occupancy_unseen_fruit": True}
+    core = SceneCore(load_settings(Settings, {**on, "occupancy_near_radius_m": 0.0}))
+    for k in range(3):
+        core.handle("camera/rgbd", sc.frame(k, 1000 * (k + 1)))
+        (out,) = core.handle("perception/tracks", tracks(k, 1000 * (k + 1), k, {}))
+    assert out[1].obstacles.spheres == ()
+    assert core.counters["unseen_fruit_frame_unfiltered"] == 3
+    core.handle("robot/joint_state", joint_state(3500))  # the arms at home, away from B
+    core.handle("camera/rgbd", sc.frame(3, 4000))
+    (out,) = core.handle("perception/tracks", tracks(3, 4000, 3, {}))
+    assert out[1].obstacles.spheres and core.counters["unseen_fruit_frame_unfiltered"] == 3
