@@ -32,7 +32,7 @@ from any branch.
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -130,30 +130,24 @@ class OccupancyGrid:
         if robot and len(pts):
             pts = pts[~_near_robot(pts, robot, self.p.robot_margin_m)]
         if robot and self.p.forget_in_robot_m is not None:
-            self._forget_in_robot(robot, self.p.forget_in_robot_m)
+            margin_m = self.p.forget_in_robot_m
+            self._forget_where(lambda c: _near_robot(c, robot, margin_m))
         if explained is not None and len(explained[1]):
             pts = pts[~_inside_any(pts, *explained)]
-            self._forget_inside(*explained)
+            self._forget_where(lambda c: _inside_any(c, *explained))
         self._hit(pts)
         old = [k for k, v in self.voxels.items() if self._expired(v)]
         for k in old:
             del self.voxels[k]
         self._remember(depth_m, measured, K, T)
 
-    def _forget_inside(self, centres_m: np.ndarray, radii_m: np.ndarray) -> None:
+    def _forget_where(self, hit: Callable[[np.ndarray], np.ndarray]) -> None:
+        """Forget the voxels whose centre (N, 3) ``hit`` flags (N,)."""
         if not self.voxels:
             return
         keys = list(self.voxels)
-        inside = _inside_any(np.array([self.voxels[k].center_m for k in keys]), centres_m, radii_m)
-        for i in np.flatnonzero(inside).tolist():
-            del self.voxels[keys[i]]
-
-    def _forget_in_robot(self, robot: Sequence[Capsule], margin_m: float) -> None:
-        if not self.voxels:
-            return
-        keys = list(self.voxels)
-        near = _near_robot(np.array([self.voxels[k].center_m for k in keys]), robot, margin_m)
-        for i in np.flatnonzero(near).tolist():
+        flagged = hit(np.array([self.voxels[k].center_m for k in keys]))
+        for i in np.flatnonzero(flagged).tolist():
             del self.voxels[keys[i]]
 
     def _remember(
