@@ -303,7 +303,9 @@ def truth_reachability(
     tree_ok: set[int] = set()
     crowded: set[int] = set()
     for i, shape in shapes.items():
-        # the IK solutions at every sampled yaw: none for a pose is the IK's "out of reach"
+        # the IK solutions at every sampled yaw: none for a pose is the IK's "out of reach".
+        # The dish right under the tip (not the planner's dish_back_m): the judge asks whether
+        # the fruit has a harvest pose, not whether the planner's choice of one works.
         sols = [
             core.kin.solutions(p.tip_world_m, p.basket_below_m)
             for p in (harvest_pose(shape, ps), pre_pose(shape, ps))

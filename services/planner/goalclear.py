@@ -24,6 +24,7 @@ import numpy as np
 from services.controller.dampers import DamperParams, damper_rows
 from services.controller.distances import PairKind
 from services.planner.freespace import FreeSpace
+from services.planner.poses import ToolPoses
 from services.robot.reach import ReachSolver
 
 _KINDS: tuple[PairKind, ...] = ("trunk", "fruit", "branch")
@@ -65,17 +66,16 @@ class GoalClearer:
         }
         self._names = space.robot.names
 
-    def clear(
-        self, q_rad: np.ndarray, tip_world_m: np.ndarray, yaw_deg: float, basket_below_m: float
-    ) -> ClearedGoal:
-        """``q_rad`` (arm order, an IK solution of the pose) moved until the robot is
-        ``margin_m`` from every obstacle with the tools still at the pose."""
+    def clear(self, q_rad: np.ndarray, pose: ToolPoses, yaw_deg: float) -> ClearedGoal:
+        """``q_rad`` (arm order, an IK solution of ``pose`` at ``yaw_deg``) moved until the
+        robot is ``margin_m`` from every obstacle with the tools still at the pose."""
         r, space = self.solver.robot, self.space
         for name, v in zip(self._names, q_rad, strict=True):
             r.set_joint(name, float(v))
         r.update_kinematics()
         yaw = math.radians(yaw_deg)
-        ik = self.solver.harvest_solver(tip_world_m, yaw, basket_below_m)
+        tip_world_m, below_m, back_m = pose.tip_world_m, pose.basket_below_m, pose.basket_back_m
+        ik = self.solver.harvest_solver(tip_world_m, yaw, below_m, back_m)
         half = ik.add_joint_space_half_spaces_constraint(np.zeros((1, r.state.q.size)), np.ones(1))
         half.configure("obstacles", "soft", 1.0)
         activation = {k: p.activation_m for k, p in self.params.items()}
@@ -85,7 +85,7 @@ class GoalClearer:
             rep = space.engine.compute(space.obstacles, activation)
             pairs = [p for p in rep.pairs if p.kind != "self"]
             clear = min((p.distance_m for p in pairs), default=math.inf) >= self.margin_m
-            if clear and self._at_pose(tip_world_m, yaw, basket_below_m):
+            if clear and self._at_pose(tip_world_m, yaw, below_m, back_m):
                 return ClearedGoal(q, step)
             rows = damper_rows(pairs, space.robot, self.params, _STEP_S)
             half.A, half.b = rows.A, rows.b
@@ -99,6 +99,6 @@ class GoalClearer:
             )
         return ClearedGoal(None, self.steps)
 
-    def _at_pose(self, tip: np.ndarray, yaw: float, below: float) -> bool:
-        pe, be = self.solver.residuals(tip, yaw, below)
+    def _at_pose(self, tip: np.ndarray, yaw: float, below: float, back: float) -> bool:
+        pe, be = self.solver.residuals(tip, yaw, below, back)
         return pe < self.tolerance_m and be < self.tolerance_m

@@ -89,8 +89,8 @@ class Kinematics:
         self.fk = placo.RobotWrapper(str(URDF_PATH))
         self.yaws_deg, self.iterations, self.tolerance_m = yaws_deg, iterations, tolerance_m
         self.cache_mm = cache_mm
-        self._cache: dict[tuple[int, int, int, int], ReachVerdict] = {}
-        self._solutions: dict[tuple[int, int, int, int], list[IkSolution]] = {}
+        self._cache: dict[tuple[int, ...], ReachVerdict] = {}
+        self._solutions: dict[tuple[int, ...], list[IkSolution]] = {}
         self.ik_solves = 0
         model = self.fk.model
         idx = [model.joints[model.getJointId(n)].idx_q for r in ARM_ROLES for n in joint_names(r)]
@@ -153,29 +153,43 @@ class Kinematics:
         q = [r.get_joint(n) for role in ARM_ROLES for n in joint_names(role)]
         return np.clip(np.array(q, float), self._lower_rad, self._upper_rad)
 
-    def solutions(self, tip_world_m: np.ndarray, basket_below_m: float) -> list[IkSolution]:
+    def _key(self, tip_world_m: np.ndarray, below_m: float, back_m: float) -> tuple[int, ...]:
+        """A pose's cache key: tip, dish below and back, rounded to ``cache_mm``."""
+        return tuple(round(float(v) * 1e3 / self.cache_mm) for v in (*tip_world_m, below_m, back_m))
+
+    def solutions(
+        self, tip_world_m: np.ndarray, basket_below_m: float, basket_back_m: float = 0.0
+    ) -> list[IkSolution]:
         """The IK solutions of this pose at every sampled yaw that reaches it: the planned
-        approach picks the one clearest of the obstacles. Cached like ``reach``."""
-        key = tuple(round(float(v) * 1e3 / self.cache_mm) for v in (*tip_world_m, basket_below_m))
-        got = self._solutions.get(key)  # type: ignore[arg-type]
+        approach picks the one clearest of the obstacles. ``basket_back_m``: the dish that far
+        back along the cutter's axis (ToolPoses.basket_back_m, where the controller puts it).
+        Cached like ``reach``."""
+        key = self._key(tip_world_m, basket_below_m, basket_back_m)
+        got = self._solutions.get(key)
         if got is not None:
             return got
         out = []
         for yaw in self.yaws_deg:
             self.ik_solves += 1
             pe, be = self.solver.solve(
-                np.asarray(tip_world_m, float), math.radians(yaw), self.iterations, basket_below_m
+                np.asarray(tip_world_m, float),
+                math.radians(yaw),
+                self.iterations,
+                basket_below_m,
+                basket_back_m,
             )
             if pe < self.tolerance_m and be < self.tolerance_m:
                 out.append(IkSolution(yaw, self._solution()))
-        self._solutions[key] = out  # type: ignore[index]
+        self._solutions[key] = out
         return out
 
-    def reach(self, tip_world_m: np.ndarray, basket_below_m: float) -> ReachVerdict:
-        """Can both tools take this pose (cutter level, some sampled yaw; dish under the tip)?
-        Cached on the pose rounded to ``cache_mm``."""
-        key = tuple(round(float(v) * 1e3 / self.cache_mm) for v in (*tip_world_m, basket_below_m))
-        got = self._cache.get(key)  # type: ignore[arg-type]
+    def reach(
+        self, tip_world_m: np.ndarray, basket_below_m: float, basket_back_m: float = 0.0
+    ) -> ReachVerdict:
+        """Can both tools take this pose (cutter level, some sampled yaw; dish under the tip,
+        ``basket_back_m`` back)? Cached on the pose rounded to ``cache_mm``."""
+        key = self._key(tip_world_m, basket_below_m, basket_back_m)
+        got = self._cache.get(key)
         if got is not None:
             return got
         best = (math.inf, math.inf)
@@ -183,7 +197,11 @@ class Kinematics:
         for yaw in self.yaws_deg:
             self.ik_solves += 1
             pe, be = self.solver.solve(
-                np.asarray(tip_world_m, float), math.radians(yaw), self.iterations, basket_below_m
+                np.asarray(tip_world_m, float),
+                math.radians(yaw),
+                self.iterations,
+                basket_below_m,
+                basket_back_m,
             )
             if pe < self.tolerance_m and be < self.tolerance_m:
                 verdict = ReachVerdict(True, yaw, pe, be)
@@ -192,5 +210,5 @@ class Kinematics:
                 best = (pe, be)
         if verdict is None:
             verdict = ReachVerdict(False, None, *best)
-        self._cache[key] = verdict  # type: ignore[index]
+        self._cache[key] = verdict
         return verdict

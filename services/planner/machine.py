@@ -332,7 +332,7 @@ class Machine:
         if self.motion is None or self.q_rad is None:
             return None
         p = pre_pose(rec.planned, self.pose_settings)
-        goals = self.kin.solutions(p.tip_world_m, p.basket_below_m)
+        goals = self.kin.solutions(p.tip_world_m, p.basket_below_m, p.basket_back_m)
         if not goals:
             return None
         seed = rec.fruit_id * 1000 + self.motion.plans
@@ -893,8 +893,8 @@ class Machine:
         p = pre_pose(rec.planned, self.pose_settings)
         if rec.reach is None:
             rec.reach = (
-                self.kin.reach(h.tip_world_m, h.basket_below_m),
-                self.kin.reach(p.tip_world_m, p.basket_below_m),
+                self.kin.reach(h.tip_world_m, h.basket_below_m, h.basket_back_m),
+                self.kin.reach(p.tip_world_m, p.basket_below_m, p.basket_back_m),
             )
         hv, pv = rec.reach
         if hv.reachable and pv.reachable:

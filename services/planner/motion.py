@@ -113,7 +113,7 @@ class ApproachPlanner:
             return best.q_rad, ""
         moved = []
         for g in goals:
-            c = self.clearer.clear(g.q_rad, pose.tip_world_m, g.yaw_deg, pose.basket_below_m)
+            c = self.clearer.clear(g.q_rad, pose, g.yaw_deg)
             if c.q_rad is not None:
                 moved.append(c.q_rad)
         if not moved:

@@ -68,27 +68,35 @@ class ReachSolver:
         yaw_rad: float = 0.0,
         iters: int = 250,
         basket_below_m: float = BASKET_BELOW_M,
+        basket_back_m: float = 0.0,
     ) -> tuple[float, float]:
         """IK of the harvest pose from the home posture. The cutter points forward (tool axis
         horizontal) turned by ``yaw_rad`` about the world vertical (the paper's free θ_a, sampled
         by ``reach``); the dish is ``basket_below_m`` under the tip, opening up, its rotation
-        about its own normal free. Returns (tip error, relative error) in m (orientation errors
+        about its own normal free, and ``basket_back_m`` back along the cutter's pointing axis
+        (the planner's ``dish_back_m``, as the controller is asked). Returns (tip error, relative error) in m (orientation errors
         × 0.1 m/rad)."""
         self.set_home()
-        s = self.harvest_solver(p_tip_world, yaw_rad, basket_below_m)
+        s = self.harvest_solver(p_tip_world, yaw_rad, basket_below_m, basket_back_m)
         for _ in range(iters):
             try:
                 s.solve(True)
             except RuntimeError:
                 break
             self.robot.update_kinematics()
-        return self.residuals(p_tip_world, yaw_rad, basket_below_m)
+        return self.residuals(p_tip_world, yaw_rad, basket_below_m, basket_back_m)
 
-    def harvest_solver(self, p_tip_world: np.ndarray, yaw_rad: float, basket_below_m: float) -> Any:
+    def harvest_solver(
+        self,
+        p_tip_world: np.ndarray,
+        yaw_rad: float,
+        basket_below_m: float,
+        basket_back_m: float = 0.0,
+    ) -> Any:
         """A placo KinematicsSolver on ``robot`` (from its joints now) with the harvest pose's
         soft tasks (see ``solve``), joint and velocity limits and self-collision avoidance;
         the caller steps it (``solve(True)``, then ``robot.update_kinematics()``)."""
-        offset = np.array([basket_below_m, 0.0, 0.0])  # cutter x points down
+        offset = dish_in_cutter_m(basket_below_m, basket_back_m)
         s = self.placo.KinematicsSolver(self.robot)
         s.mask_fbase(True)
         s.enable_joint_limits(True)
@@ -113,13 +121,17 @@ class ReachSolver:
         return s
 
     def residuals(
-        self, p_tip_world: np.ndarray, yaw_rad: float, basket_below_m: float
+        self,
+        p_tip_world: np.ndarray,
+        yaw_rad: float,
+        basket_below_m: float,
+        basket_back_m: float = 0.0,
     ) -> tuple[float, float]:
         """(tip error, relative error) of ``robot``'s joints now for the harvest pose, m (see
         ``solve``)."""
         r = self.robot
         R = rot_z(yaw_rad) @ _FWD
-        offset = np.array([basket_below_m, 0.0, 0.0])
+        offset = dish_in_cutter_m(basket_below_m, basket_back_m)
         T = r.get_T_world_frame(TOOL_FRAME["cutter"])
         pos_err = float(np.linalg.norm(T[:3, 3] - p_tip_world))
         pos_err += 0.1 * float(np.linalg.norm(_log3(R @ T[:3, :3].T)))
@@ -151,8 +163,14 @@ class ReachSolver:
         return p[:3]
 
 
+def dish_in_cutter_m(below_m: float, back_m: float = 0.0) -> np.ndarray:
+    """The dish centre in the cutter frame, m: ``below_m`` under the tip (cutter x points down)
+    and ``back_m`` back along its pointing axis (cutter z), as in the planner's PlanTarget."""
+    return np.array([below_m, 0.0, -back_m])
+
+
 def _basket_offset() -> np.ndarray:
-    return np.array([BASKET_BELOW_M, 0.0, 0.0])  # cutter x points down
+    return dish_in_cutter_m(BASKET_BELOW_M)
 
 
 def basket_offset_cutter_m() -> np.ndarray:

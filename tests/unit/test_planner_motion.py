@@ -36,7 +36,7 @@ def planned_core() -> PlannerCore:
 def pre_pose_solution(core: PlannerCore) -> IkSolution:
     rec = core.book.records[1]
     p = pre_pose(rec.planned, core.machine.pose_settings)
-    solutions = core.kin.solutions(p.tip_world_m, p.basket_below_m)
+    solutions = core.kin.solutions(p.tip_world_m, p.basket_below_m, p.basket_back_m)
     assert solutions
     return solutions[0]
 
@@ -95,8 +95,13 @@ def test_no_path_is_reported_and_the_pose_goals_are_used() -> None:
 def elbow_in_a_branch(
     core: PlannerCore, planner: ApproachPlanner, radius_m: float = 0.03, fruit: bool = False
 ) -> IkSolution:
-    """A branch sphere (or a fruit) on the collector's elbow at the pre-pose's IK solution."""
-    sol = pre_pose_solution(core)
+    """A branch sphere (or a fruit) on the collector's elbow at the pre-pose's IK solution (at
+    25° yaw: at 0° the elbow's centre falls on the end of the third link's capsule axis, which
+    reads 95 mm deep instead of the sphere's 30)."""
+    rec = core.book.records[1]
+    p = pre_pose(rec.planned, core.machine.pose_settings)
+    sols = core.kin.solutions(p.tip_world_m, p.basket_below_m, p.basket_back_m)
+    sol = next(s for s in sols if s.yaw_deg == 25.0)
     robot = planner.space.robot
     robot.set_q(sol.q_rad)
     elbow = tuple(robot.data.oMi[robot.model.getJointId("collector_j4")].translation)
