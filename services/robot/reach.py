@@ -74,8 +74,8 @@ class ReachSolver:
         horizontal) turned by ``yaw_rad`` about the world vertical (the paper's free θ_a, sampled
         by ``reach``); the dish is ``basket_below_m`` under the tip, opening up, its rotation
         about its own normal free, and ``basket_back_m`` back along the cutter's pointing axis
-        (the planner's ``dish_back_m``, as the controller is asked). Returns (tip error, relative error) in m (orientation errors
-        × 0.1 m/rad)."""
+        (the planner's ``dish_back_m``, as the controller is asked). Returns (tip error,
+        relative error) in m (orientation errors × 0.1 m/rad)."""
         self.set_home()
         s = self.harvest_solver(p_tip_world, yaw_rad, basket_below_m, basket_back_m)
         for _ in range(iters):
