@@ -129,6 +129,12 @@ class Settings(ServiceSettings):
         "the sphere radius: they put a tool 19–41 mm nearer a branch than it is) the clearest "
         "solution's tools may go, m.",
     )
+    branch_check_dish_under: bool = Field(
+        default=True,
+        description="… when the poses with the dish dish_back_m back are refused, check them "
+        "with the dish right under the tip and, if those are clear, send the controller those "
+        "(the IK measures the dish where it is sent; the back place is the rule, not a need).",
+    )
     branch_check_own_branch_m: float = Field(
         default=0.1,
         ge=0,

@@ -32,7 +32,7 @@ improvement by ``progress_min_m`` for ``no_progress_s`` is "stuck". Statuses of 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -41,7 +41,7 @@ from schemas.harvest import FruitOutcome, HarvestEventKind
 from schemas.scene import Fruit
 from services.planner import Settings
 from services.planner.book import FruitBook, FruitRecord
-from services.planner.branchcheck import BranchCheck
+from services.planner.branchcheck import BranchCheck, BranchVerdict
 from services.planner.clutter import clearable, intrusions_m, same_fruit
 from services.planner.crowd import CrowdCheck, Crowding
 from services.planner.kinematics import Kinematics
@@ -212,7 +212,7 @@ class Machine:
         poses = pre_pose if self.phase in ("approach", "leave") else harvest_pose
         return Goal(
             self.phase,
-            poses(self._aimed(rec), self.pose_settings),
+            poses(self._aimed(rec), self.pose_settings, rec.dish_back_m),
             rec.fruit_id,
             self._ignore(rec if touching else None),
         )
@@ -331,7 +331,7 @@ class Machine:
         follow; None: no planner, no joint state or no path (the pose goals)."""
         if self.motion is None or self.q_rad is None:
             return None
-        p = pre_pose(rec.planned, self.pose_settings)
+        p = pre_pose(rec.planned, self.pose_settings, rec.dish_back_m)
         goals = self.kin.solutions(p.tip_world_m, p.basket_below_m, p.basket_back_m)
         if not goals:
             return None
@@ -619,6 +619,8 @@ class Machine:
             rec.started_ns = now
         rec.attempt_ns = now
         self.path.start(self.q_rad)
+        if rec.dish_back_m is not None:
+            why += "; the dish right under it (the branches seen leave no room farther back)"
         self.events.append(Event("fruit_selected", rec.fruit_id, reason=why))
         self.progress = Progress(now, self.next_seq)
         self.replans_left = self.s.plan_retries
@@ -727,8 +729,8 @@ class Machine:
         crowding = self.crowd.crowders(
             self.kin,
             [
-                ("harvest pose", harvest_pose(rec.planned, self.pose_settings)),
-                ("pre-pose", pre_pose(rec.planned, self.pose_settings)),
+                ("harvest pose", harvest_pose(rec.planned, self.pose_settings, rec.dish_back_m)),
+                ("pre-pose", pre_pose(rec.planned, self.pose_settings, rec.dish_back_m)),
             ],
             [r.planned for r in present],
         )
@@ -899,10 +901,9 @@ class Machine:
         hv, pv = rec.reach
         if hv.reachable and pv.reachable:
             if self.branches is None:
+                rec.dish_back_m = None
                 return True
-            verdict = self.branches.check(
-                self.kin, rec.planned, [("harvest pose", h), ("pre-pose", p)]
-            )
+            verdict = self._branch_verdict(rec, h, p)
             if verdict.clear:
                 return True
             if not rec.deferred:
@@ -921,6 +922,27 @@ class Machine:
         self._finish(rec, now, "unreachable", why)
         rec.finished_ns = now  # never attempted
         return False
+
+    def _branch_verdict(self, rec: FruitRecord, h: ToolPoses, p: ToolPoses) -> BranchVerdict:
+        """The branch check of the pose rule's poses ``h``, ``p``; when it refuses them and the
+        rule set the dish back, of the dish right under the tip too (``branch_check_dish_under``),
+        whose poses the controller is then sent (``rec.dish_back_m``). The rule's verdict names
+        a refusal."""
+        assert self.branches is not None
+        rec.dish_back_m = None
+        verdict = self.branches.check(self.kin, rec.planned, [("harvest pose", h), ("pre-pose", p)])
+        if verdict.clear or h.basket_back_m == 0.0 or not self.s.branch_check_dish_under:
+            return verdict
+        under = [replace(x, basket_back_m=0.0) for x in (h, p)]
+        if not all(self.kin.reach(x.tip_world_m, x.basket_below_m).reachable for x in under):
+            return verdict
+        alt = self.branches.check(
+            self.kin, rec.planned, [("harvest pose", under[0]), ("pre-pose", under[1])]
+        )
+        if not alt.clear:
+            return verdict
+        rec.dish_back_m = 0.0
+        return alt
 
     def resume_cut(self, rec: FruitRecord, cut: CutState, now: int, next_seq: int) -> None:
         """A restarted planner (journal.py): the cut of ``rec`` sent before the restart is

@@ -82,18 +82,20 @@ def dish_back_m(f: FruitShape, p: PoseSettings) -> float:
     )
 
 
-def harvest_pose(f: FruitShape, p: PoseSettings) -> ToolPoses:
+def harvest_pose(f: FruitShape, p: PoseSettings, back_m: float | None = None) -> ToolPoses:
     """x_a: the tip d_v + d_s above the fruit centre (on the peduncle); the dish under it,
     a little back towards the robot (``dish_back_m``: it still catches the fruit, and keeps
-    clear of fruit hanging behind)."""
+    clear of fruit hanging behind), or ``back_m`` back where given (the planner's choice for
+    this fruit)."""
     tip = f.centre_world_m + np.array([0.0, 0.0, f.d_v_m + p.security_m])
-    return ToolPoses(tip, basket_below_m(f, p), basket_back_m=dish_back_m(f, p))
+    back = dish_back_m(f, p) if back_m is None else back_m
+    return ToolPoses(tip, basket_below_m(f, p), basket_back_m=back)
 
 
-def pre_pose(f: FruitShape, p: PoseSettings) -> ToolPoses:
+def pre_pose(f: FruitShape, p: PoseSettings, back_m: float | None = None) -> ToolPoses:
     """The approach/leave pose: the harvest pose moved d_z back along the optical axis, the
     dish a little lower (its rim clears the fruit's underside by more than the damper's d_s)."""
-    h = harvest_pose(f, p)
+    h = harvest_pose(f, p, back_m)
     return ToolPoses(
         h.tip_world_m - p.approach_m * p.camera_axis_world,
         h.basket_below_m + p.approach_basket_drop_m,

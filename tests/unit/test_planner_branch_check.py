@@ -179,3 +179,38 @@ def test_what_came_after_the_start_counts_once_it_stayed() -> None:
     check.set_scene(scene((), at_s=6.2))
     check.set_scene(scene(hand, at_s=6.3))
     assert check.young == len(hand)
+
+
+@pytest.mark.parametrize("dish_under", [True, False])
+def test_a_branch_behind_the_dish_sends_it_right_under_the_fruit(dish_under: bool) -> None:
+    """The pose rule sets the dish 1.5 cm back towards the robot (dish_back_m, cut by the catch
+    margin). A branch just behind that place refuses those poses; with the dish right under the
+    tip they are clear, so the fruit is taken with the dish there, and the controller is sent
+    that place (``branch_check_dish_under``; off: deferred, as before session 40)."""
+    core = checking()
+    m = core.machine
+    m.s = core.s = core.s.model_copy(update={"branch_check_dish_under": dish_under})
+    assert m.branches is not None
+    rec = core.book.records[1]
+    assert harvest_pose(rec.planned, m.pose_settings).basket_back_m > 0.01
+    behind = tuple(
+        SphereObstacle(
+            name=f"b{k}",
+            center_world_m=tuple(dish_level(core) + np.array([-0.10, y, 0.04])),
+            radius_m=0.03,
+        )
+        for k, y in enumerate(np.arange(-0.06, 0.061, 0.03))
+    )
+    m.branches.set_scene(scene(behind))
+    if not dish_under:
+        assert select(core) == 3 and rec.deferred
+        assert skips(core, 1)[0].startswith("blocked: a branch in the tools' way at the harvest")
+        return
+    assert select(core) == 1 and rec.dish_back_m == 0.0
+    (why,) = [e.reason for e in m.events if e.event == "fruit_selected"]
+    assert why.endswith("the dish right under it (the branches seen leave no room farther back)")
+    m.phase = "harvest"
+    goal = m.goal()
+    assert goal.poses is not None and goal.poses.basket_back_m == 0.0
+    m.branches.set_scene(scene(()))  # the branch gone: the rule's place again
+    assert select(core) == 1 and rec.dish_back_m is None
