@@ -10,7 +10,8 @@ contact), atomically (write + rename). The supervisor makes that folder for the 
 the start, removed at the end), so only a *restarted* planner finds a journal, and takes it:
 
 * settled fruit keep their outcome (a harvested fruit is counted once, never tried again);
-* unsettled ones keep cuts, losses, time spent and their deferred mark, and are selected anew
+* unsettled ones keep cuts, losses, time spent, their deferred mark and the dish's place the
+  branch check chose, and are selected anew
   (the new process starts from select: a fruit being approached is approached again);
 * a cut sent but not yet confirmed is awaited again (the basket count going up settles it as
   harvested; else the usual verdict after ``collect_timeout_s`` from the original cut);
@@ -66,6 +67,7 @@ def _record(r: FruitRecord) -> dict[str, Any]:
         "scene_mark_ok": r.scene_mark_ok,
         "last_seen_ns": r.last_seen_ns,
         "sightings": r.sightings,
+        "dish_back_m": r.dish_back_m,
     }
 
 
@@ -92,7 +94,17 @@ def _unrecord(d: dict[str, Any]) -> FruitRecord:
         scene_mark_ok=d.get("scene_mark_ok", True),
         last_seen_ns=d.get("last_seen_ns"),
         sightings=d.get("sightings", MIN_SIGHTINGS),  # older journals: records were fruit
+        dish_back_m=_metres_or_none(d.get("dish_back_m")),  # a cut awaited leaves with it
     )
+
+
+def _metres_or_none(v: Any) -> float | None:
+    """A record's ``dish_back_m``: None (the pose rule; older journals) or a finite float."""
+    if v is None:
+        return None
+    if type(v) not in (int, float) or not np.isfinite(v):
+        raise ValueError(f"dish_back_m {v!r} is not a distance in metres")
+    return float(v)
 
 
 def _track_id_or_none(v: Any) -> int | None:
