@@ -25,7 +25,7 @@ import tempfile
 import time
 from collections import Counter
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -307,7 +307,7 @@ def truth_reachability(
         # The dish right under the tip (not the planner's dish_back_m): the judge asks whether
         # the fruit has a harvest pose, not whether the planner's choice of one works.
         sols = [
-            core.kin.solutions(p.tip_world_m, p.basket_below_m)
+            core.kin.solutions(replace(p, basket_back_m=0.0))
             for p in (harvest_pose(shape, ps), pre_pose(shape, ps))
         ]
         if not all(sols):

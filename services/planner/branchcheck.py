@@ -150,7 +150,7 @@ class BranchCheck:
             return BranchVerdict(True)
         self.space.set_obstacles(Obstacles(spheres=spheres))
         for name, pose in poses:
-            sols = kin.solutions(pose.tip_world_m, pose.basket_below_m, pose.basket_back_m)
+            sols = kin.solutions(pose)
             if not sols:
                 continue  # out of reach: the IK check says so
             depth, sphere = min(self._deepest(s.q_rad, spheres) for s in sols)

@@ -86,7 +86,7 @@ class CrowdCheck:
             )
         )
         for name, pose in poses:
-            sols = kin.solutions(pose.tip_world_m, pose.basket_below_m, pose.basket_back_m)
+            sols = kin.solutions(pose)
             if not sols:
                 continue
             touched = [self._touched(s.q_rad, centres, semi) for s in sols]

@@ -15,6 +15,7 @@ import numpy as np
 
 from schemas.base import ARM_ROLES, ArmRole
 from schemas.robot import JointState
+from services.planner.poses import ToolPoses
 from services.robot.model import CAMERA_FRAME, HOME_RAD, TOOL_FRAME, URDF_PATH, joint_names
 from services.robot.reach import R_WORLD_CUTTER_FORWARD, ReachSolver
 
@@ -153,56 +154,49 @@ class Kinematics:
         q = [r.get_joint(n) for role in ARM_ROLES for n in joint_names(role)]
         return np.clip(np.array(q, float), self._lower_rad, self._upper_rad)
 
-    def _key(self, tip_world_m: np.ndarray, below_m: float, back_m: float) -> tuple[int, ...]:
+    def _key(self, pose: ToolPoses) -> tuple[int, ...]:
         """A pose's cache key: tip, dish below and back, rounded to ``cache_mm``."""
-        return tuple(round(float(v) * 1e3 / self.cache_mm) for v in (*tip_world_m, below_m, back_m))
+        values = (*pose.tip_world_m, pose.basket_below_m, pose.basket_back_m)
+        return tuple(round(float(v) * 1e3 / self.cache_mm) for v in values)
 
-    def solutions(
-        self, tip_world_m: np.ndarray, basket_below_m: float, basket_back_m: float = 0.0
-    ) -> list[IkSolution]:
+    def _solve(self, pose: ToolPoses, yaw_deg: float) -> tuple[float, float]:
+        """IK of ``pose`` at one cutter yaw, the dish where the PlanTarget sends it (below and
+        back): (tip error, dish error), m."""
+        self.ik_solves += 1
+        return self.solver.solve(
+            np.asarray(pose.tip_world_m, float),
+            math.radians(yaw_deg),
+            self.iterations,
+            pose.basket_below_m,
+            pose.basket_back_m,
+        )
+
+    def solutions(self, pose: ToolPoses) -> list[IkSolution]:
         """The IK solutions of this pose at every sampled yaw that reaches it: the planned
-        approach picks the one clearest of the obstacles. ``basket_back_m``: the dish that far
-        back along the cutter's axis (ToolPoses.basket_back_m, where the controller puts it).
-        Cached like ``reach``."""
-        key = self._key(tip_world_m, basket_below_m, basket_back_m)
+        approach picks the one clearest of the obstacles. Cached like ``reach``."""
+        key = self._key(pose)
         got = self._solutions.get(key)
         if got is not None:
             return got
         out = []
         for yaw in self.yaws_deg:
-            self.ik_solves += 1
-            pe, be = self.solver.solve(
-                np.asarray(tip_world_m, float),
-                math.radians(yaw),
-                self.iterations,
-                basket_below_m,
-                basket_back_m,
-            )
+            pe, be = self._solve(pose, yaw)
             if pe < self.tolerance_m and be < self.tolerance_m:
                 out.append(IkSolution(yaw, self._solution()))
         self._solutions[key] = out
         return out
 
-    def reach(
-        self, tip_world_m: np.ndarray, basket_below_m: float, basket_back_m: float = 0.0
-    ) -> ReachVerdict:
-        """Can both tools take this pose (cutter level, some sampled yaw; dish under the tip,
+    def reach(self, pose: ToolPoses) -> ReachVerdict:
+        """Can both tools take this pose (cutter level, some sampled yaw; the dish under the tip,
         ``basket_back_m`` back)? Cached on the pose rounded to ``cache_mm``."""
-        key = self._key(tip_world_m, basket_below_m, basket_back_m)
+        key = self._key(pose)
         got = self._cache.get(key)
         if got is not None:
             return got
         best = (math.inf, math.inf)
         verdict: ReachVerdict | None = None
         for yaw in self.yaws_deg:
-            self.ik_solves += 1
-            pe, be = self.solver.solve(
-                np.asarray(tip_world_m, float),
-                math.radians(yaw),
-                self.iterations,
-                basket_below_m,
-                basket_back_m,
-            )
+            pe, be = self._solve(pose, yaw)
             if pe < self.tolerance_m and be < self.tolerance_m:
                 verdict = ReachVerdict(True, yaw, pe, be)
                 break

@@ -332,7 +332,7 @@ class Machine:
         if self.motion is None or self.q_rad is None:
             return None
         p = pre_pose(rec.planned, self.pose_settings, rec.dish_back_m)
-        goals = self.kin.solutions(p.tip_world_m, p.basket_below_m, p.basket_back_m)
+        goals = self.kin.solutions(p)
         if not goals:
             return None
         seed = rec.fruit_id * 1000 + self.motion.plans
@@ -894,10 +894,7 @@ class Machine:
         h = harvest_pose(rec.planned, self.pose_settings)
         p = pre_pose(rec.planned, self.pose_settings)
         if rec.reach is None:
-            rec.reach = (
-                self.kin.reach(h.tip_world_m, h.basket_below_m, h.basket_back_m),
-                self.kin.reach(p.tip_world_m, p.basket_below_m, p.basket_back_m),
-            )
+            rec.reach = (self.kin.reach(h), self.kin.reach(p))
         hv, pv = rec.reach
         if hv.reachable and pv.reachable:
             if self.branches is None:
@@ -934,7 +931,7 @@ class Machine:
         if verdict.clear or h.basket_back_m == 0.0 or not self.s.branch_check_dish_under:
             return verdict
         under = [replace(x, basket_back_m=0.0) for x in (h, p)]
-        if not all(self.kin.reach(x.tip_world_m, x.basket_below_m).reachable for x in under):
+        if not all(self.kin.reach(x).reachable for x in under):
             return verdict
         alt = self.branches.check(
             self.kin, rec.planned, [("harvest pose", under[0]), ("pre-pose", under[1])]

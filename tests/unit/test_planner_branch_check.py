@@ -7,6 +7,8 @@ above it is not in the way."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -139,7 +141,7 @@ def test_only_the_tools_are_measured() -> None:
     check = BranchCheck(0.02, 0.1)
     core = checking()
     h = harvest_pose(core.book.records[1].planned, core.machine.pose_settings)
-    q = core.kin.solutions(h.tip_world_m, h.basket_below_m)[0].q_rad
+    q = core.kin.solutions(replace(h, basket_back_m=0.0))[0].q_rad
     robot = check.space.robot
     robot.set_q(q)
     for frame, counts in (("cutter_link4", False), ("cutter_tool", True)):

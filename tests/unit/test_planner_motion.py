@@ -33,12 +33,15 @@ def planned_core() -> PlannerCore:
     return core
 
 
-def pre_pose_solution(core: PlannerCore) -> IkSolution:
+def pre_pose_solutions(core: PlannerCore) -> list[IkSolution]:
     rec = core.book.records[1]
-    p = pre_pose(rec.planned, core.machine.pose_settings)
-    solutions = core.kin.solutions(p.tip_world_m, p.basket_below_m, p.basket_back_m)
+    solutions = core.kin.solutions(pre_pose(rec.planned, core.machine.pose_settings))
     assert solutions
-    return solutions[0]
+    return solutions
+
+
+def pre_pose_solution(core: PlannerCore) -> IkSolution:
+    return pre_pose_solutions(core)[0]
 
 
 def pre_pose_joints(core: PlannerCore) -> np.ndarray:
@@ -98,10 +101,7 @@ def elbow_in_a_branch(
     """A branch sphere (or a fruit) on the collector's elbow at the pre-pose's IK solution (at
     25° yaw: at 0° the elbow's centre falls on the end of the third link's capsule axis, which
     reads 95 mm deep instead of the sphere's 30)."""
-    rec = core.book.records[1]
-    p = pre_pose(rec.planned, core.machine.pose_settings)
-    sols = core.kin.solutions(p.tip_world_m, p.basket_below_m, p.basket_back_m)
-    sol = next(s for s in sols if s.yaw_deg == 25.0)
+    sol = next(s for s in pre_pose_solutions(core) if s.yaw_deg == 25.0)
     robot = planner.space.robot
     robot.set_q(sol.q_rad)
     elbow = tuple(robot.data.oMi[robot.model.getJointId("collector_j4")].translation)

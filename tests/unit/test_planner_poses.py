@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -98,18 +100,20 @@ def test_the_planners_ik_puts_the_dish_where_the_controller_is_sent() -> None:
     f = FruitShape(np.array([0.70, 0.0, 1.40]), 0.035, 0.035)
     h = harvest_pose(f, core.machine.pose_settings)
     assert h.basket_back_m > 0.01  # the defaults set the dish back
-    sols = core.kin.solutions(h.tip_world_m, h.basket_below_m, h.basket_back_m)
+    sols = core.kin.solutions(h)
     assert sols
     sent = plan_target(Header(stamp_ns=0, seq=0, source="planner"), "approach", h).relative
     assert sent is not None
     robot = FreeSpace(cull_m=0.05).robot
-    for s in sols:
-        robot.set_q(s.q_rad)
+
+    def tip_and_dish_in_cutter(q_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        robot.set_q(q_rad)
         T_cut, T_dish = robot.T_world(TOOL_FRAME["cutter"]), robot.T_world(TOOL_FRAME["collector"])
-        dish_in_cutter = T_cut[:3, :3].T @ (T_dish[:3, 3] - T_cut[:3, 3])
+        return T_cut[:3, 3], T_cut[:3, :3].T @ (T_dish[:3, 3] - T_cut[:3, 3])
+
+    for s in sols:
+        tip, dish_in_cutter = tip_and_dish_in_cutter(s.q_rad)
         assert dish_in_cutter == pytest.approx(sent.position_m, abs=0.005)
-        assert T_cut[:3, 3] == pytest.approx(h.tip_world_m, abs=0.005)
-    under = core.kin.solutions(h.tip_world_m, h.basket_below_m)  # the judge's: right under
-    robot.set_q(under[0].q_rad)
-    T_cut, T_dish = robot.T_world(TOOL_FRAME["cutter"]), robot.T_world(TOOL_FRAME["collector"])
-    assert (T_cut[:3, :3].T @ (T_dish[:3, 3] - T_cut[:3, 3]))[2] == pytest.approx(0.0, abs=0.005)
+        assert tip == pytest.approx(h.tip_world_m, abs=0.005)
+    under = core.kin.solutions(replace(h, basket_back_m=0.0))  # the judge's: right under
+    assert tip_and_dish_in_cutter(under[0].q_rad)[1][2] == pytest.approx(0.0, abs=0.005)
