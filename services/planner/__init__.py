@@ -135,6 +135,14 @@ class Settings(ServiceSettings):
         "with the dish right under the tip and, if those are clear, send the controller those "
         "(the IK measures the dish where it is sent; the back place is the rule, not a need).",
     )
+    branch_check_recheck_s: float = Field(
+        default=3.0,
+        ge=0,
+        le=60,
+        description="… a fruit refused is looked at again no sooner than this after the "
+        "refusal, the arms at the ready pose if nothing else is left (orchard seed 4: right "
+        "after a harvest, four fruit were refused and given up in the same tick), s.",
+    )
     branch_check_own_branch_m: float = Field(
         default=0.1,
         ge=0,

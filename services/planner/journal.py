@@ -68,6 +68,7 @@ def _record(r: FruitRecord) -> dict[str, Any]:
         "last_seen_ns": r.last_seen_ns,
         "sightings": r.sightings,
         "dish_back_m": r.dish_back_m,
+        "branch_refused_ns": r.branch_refused_ns,
     }
 
 
@@ -95,6 +96,7 @@ def _unrecord(d: dict[str, Any]) -> FruitRecord:
         last_seen_ns=d.get("last_seen_ns"),
         sightings=d.get("sightings", MIN_SIGHTINGS),  # older journals: records were fruit
         dish_back_m=_metres_or_none(d.get("dish_back_m")),  # a cut awaited leaves with it
+        branch_refused_ns=_stamp_or_none(d.get("branch_refused_ns")),
     )
 
 
@@ -105,6 +107,15 @@ def _metres_or_none(v: Any) -> float | None:
     if type(v) not in (int, float) or not np.isfinite(v):
         raise ValueError(f"dish_back_m {v!r} is not a distance in metres")
     return float(v)
+
+
+def _stamp_or_none(v: Any) -> int | None:
+    """A record's ``branch_refused_ns``: None (never refused; older journals) or a stamp."""
+    if v is None:
+        return None
+    if type(v) is not int or v < 0:
+        raise ValueError(f"branch_refused_ns {v!r} is not a sim stamp in nanoseconds")
+    return v
 
 
 def _track_id_or_none(v: Any) -> int | None:

@@ -640,12 +640,16 @@ class Machine:
         harvested later, even one that was itself deferred (a chain: C blocks B blocks A). When
         every candidate is blocked and already waited, the run waits at the ready pose while a
         blocker is hidden (the arms stood in front of it: orchard seed 15 gave a fruit up 0.3 s
-        before its blocker showed again); with none hidden, the nearest is given up: nothing is
-        left that could clear the way."""
+        before its blocker showed again) or a fruit the branch check refused is still to be
+        looked at again; with neither, the nearest is given up: nothing is left that could
+        clear the way."""
         first_blocked: tuple[FruitRecord, list[FruitRecord]] | None = None
         newly_deferred = False
+        pending = self._rechecks(cands, now)
         for i in nearest_first([r.seen.distance_m for r in cands]):
             rec = cands[i]
+            if rec in pending:
+                continue
             if not self._check_reach(rec, now):
                 return None
             blocking = self._blockers(rec)
@@ -655,6 +659,8 @@ class Machine:
             if not rec.deferred:
                 self._blocked(rec, blocking, now, wait=True)
                 newly_deferred = True
+        if pending and not newly_deferred:
+            return self._recheck_wait(pending)  # a fruit looked at again may clear the way
         if first_blocked is not None and not newly_deferred:
             hidden = self._hidden_blockers(first_blocked[1], cands, now)
             if hidden:
@@ -665,6 +671,24 @@ class Machine:
                 return tried
             self._blocked(*first_blocked, now, wait=False)
         return None
+
+    def _rechecks(self, cands: list[FruitRecord], now: int) -> list[FruitRecord]:
+        """Candidates the branch check refused less than ``branch_check_recheck_s`` ago: not
+        looked at again yet. Right after a harvest the arms stood in front of the tree and what
+        they hid reads as occupied space until a view from the ready pose clears it (orchard
+        seed 4: four fruit refused and given up in the same tick, 95–107 mm deep)."""
+        wait_ns = round(self.s.branch_check_recheck_s * NS)
+        return [
+            r
+            for r in cands
+            if r.branch_refused_ns is not None and now < r.branch_refused_ns + wait_ns
+        ]
+
+    def _recheck_wait(self, pending: list[FruitRecord]) -> Wait:
+        """Wait at the ready pose for the first of ``pending`` to be looked at again."""
+        first = min(pending, key=lambda r: r.branch_refused_ns or 0)
+        at_s = ((first.branch_refused_ns or 0) / NS) + self.s.branch_check_recheck_s
+        return Wait(f"#{first.fruit_id} waits for another look at the branches ({at_s:.1f} s)")
 
     def _try_through(self, cands: list[FruitRecord]) -> tuple[FruitRecord, str] | None:
         """Every candidate is blocked and has waited: rather than give them all up, go once for
@@ -749,13 +773,19 @@ class Machine:
         hidden = {r.key for r in self._hidden(now)}
         return [b for b in blocking if b.key not in keys and b.key in hidden]
 
-    def _planned_pick(self, cands: list[FruitRecord], now: int) -> tuple[FruitRecord, str] | None:
+    def _planned_pick(
+        self, cands: list[FruitRecord], now: int
+    ) -> tuple[FruitRecord, str] | Wait | None:
         """The first fruit of the shortest order that harvests every blocker before the fruit
-        it blocks; None: the candidates changed.
+        it blocks; None: the candidates changed; ``Wait``: a fruit the branch check refused
+        is to be looked at again first (the order is planned with its verdict).
 
         A fruit blocked by one that is still to do but not a candidate now (waiting after a
         stuck attempt) waits too; one that no order can clear (blocked by a fruit that stays,
         or in a cycle of blockers) is given up."""
+        pending = self._rechecks(cands, now)
+        if pending:
+            return self._recheck_wait(pending)
         if not all([self._check_reach(r, now) for r in cands]):  # each checked: a list
             return None  # skipped or deferred: the candidates changed
         ok = cands
@@ -890,7 +920,8 @@ class Machine:
     def _check_reach(self, rec: FruitRecord, now: int) -> bool:
         """IK of the harvest pose and the pre-pose (cached), then (``branch_check``) their IK
         solutions against the branches seen now. Out of reach: skipped now, final; a branch in
-        the way: deferred the first time (retried after the others), final the second."""
+        the way: deferred the first time (retried after the others, ``_rechecks``), final the
+        second."""
         h = harvest_pose(rec.planned, self.pose_settings)
         p = pre_pose(rec.planned, self.pose_settings)
         if rec.reach is None:
@@ -903,10 +934,11 @@ class Machine:
             verdict = self._branch_verdict(rec, h, p)
             if verdict.clear:
                 return True
-            if not rec.deferred:
+            if rec.branch_refused_ns is None:
                 # What reads as a branch may be passing (a hand seen in front is occupied space
-                # while it is hit): look again when nothing else is left.
-                rec.deferred = True
+                # while it is hit, and so is what an arm hid until a view clears it): look
+                # again when nothing else is left, and no sooner than branch_check_recheck_s.
+                rec.deferred, rec.branch_refused_ns = True, now
                 why = f"blocked: {verdict.why()}; retried after the others"
                 self.events.append(Event("fruit_skipped", rec.fruit_id, reason=why))
                 return False

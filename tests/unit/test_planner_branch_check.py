@@ -78,7 +78,12 @@ def test_a_branch_where_the_dish_goes_defers_the_fruit_then_refuses_it(
     assert "puts a tool" in first and "mm into the occupied space seen" in first
     assert first.endswith("retried after the others")
     core.book.records[3].outcome = "harvested"
-    assert select(core) is None  # only fruit 1 is left, and the branch is still there
+    # Only fruit 1 is left: the arms wait at the ready pose for another look, then (the branch
+    # still there) it is given up.
+    recheck_s = core.s.branch_check_recheck_s
+    assert select(core, recheck_s - 0.1) is None and not rec.finished
+    assert core.machine.phase == "home" and len(skips(core, 1)) == 1
+    assert select(core, recheck_s) is None
     assert rec.outcome == "unreachable" and rec.finished
     assert skips(core, 1)[1].startswith("unreachable: a branch in the tools' way")
 
@@ -96,12 +101,26 @@ def test_an_unseen_fruit_in_the_way_is_named_as_such() -> None:
     (first,) = skips(core, 1)
     assert first.startswith("blocked: a fruit the detector has not found in the tools' way")
     core.book.records[3].outcome = "harvested"
-    assert select(core) is None
+    assert select(core, core.s.branch_check_recheck_s) is None
     final = skips(core, 1)[1]
     assert fate_of("unreachable", final, 1.0) == "unseen_fruit_refused"
     assert fate_of("unreachable", "unreachable: a branch in the tools' way", 1.0) == (
         "branch_refused"
     )
+
+
+def test_a_fruit_deferred_for_something_else_gets_its_own_second_look() -> None:
+    """Deferred before (a stalled attempt, a blocker) and then refused by the check for the
+    first time: it waits for another look at the branches, it is not given up at once."""
+    core = checking()
+    assert core.machine.branches is not None
+    rec = core.book.records[1]
+    rec.deferred = True
+    core.book.records[3].outcome = "harvested"
+    core.machine.branches.set_scene(scene(branch(dish_level(core))))
+    assert select(core, 5.0) is None and not rec.finished and rec.branch_refused_ns == 5e9
+    assert core.machine.phase == "home"
+    assert select(core, 5.0 + core.s.branch_check_recheck_s) is None and rec.finished
 
 
 def test_what_was_gone_at_the_second_look_is_harvested() -> None:
@@ -111,7 +130,8 @@ def test_what_was_gone_at_the_second_look_is_harvested() -> None:
     assert select(core) == 3
     core.book.records[3].outcome = "harvested"
     core.machine.branches.set_scene(scene(()))
-    assert select(core) == 1 and not core.book.records[1].finished
+    assert select(core, core.s.branch_check_recheck_s) == 1
+    assert not core.book.records[1].finished
 
 
 def test_branches_elsewhere_or_no_check_leave_the_fruit_alone() -> None:

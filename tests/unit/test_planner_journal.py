@@ -27,6 +27,7 @@ def book_with_two() -> FruitBook:
     r.outcome_id = 3  # harvested as 3, before its track moved on to 9
     b.records[4].losses, b.records[4].deferred = 1, True
     b.records[4].dish_back_m = 0.0  # the branch check's place for the dish
+    b.records[4].branch_refused_ns = 12_000_000_000  # its first refusal: looked at again later
     return b
 
 
@@ -45,6 +46,7 @@ def test_a_journal_gives_back_every_record_and_the_pending_cut(tmp_path: Path) -
     assert got.seen == was.seen and not got.in_scene  # until a scene lists it again
     assert fresh.records[4].losses == 1 and fresh.records[4].deferred
     assert fresh.records[4].dish_back_m == 0.0 and got.dish_back_m is None
+    assert fresh.records[4].branch_refused_ns == 12_000_000_000 and got.branch_refused_ns is None
     assert fresh.records[4].sightings == b.records[4].sightings == MIN_SIGHTINGS
     # The harvested fruit is never a candidate again; the other one is once it is seen.
     fresh.update(scene(fruit(9, (0.61, 0.0, 1.3)), fruit(4, (0.7, 0.05, 1.25))), never)
@@ -112,14 +114,26 @@ def test_a_cut_sent_before_the_restart_is_confirmed_by_the_basket(tmp_path: Path
     assert jr.load(path, FruitBook(0.04, 0.015)) == (0, None)  # journaled: settled, no cut
 
 
-@pytest.mark.parametrize("bad", ["0.0", float("nan"), [0.0]])
-def test_a_journal_with_a_bad_dish_place_starts_afresh(tmp_path: Path, bad: object) -> None:
+@pytest.mark.parametrize(
+    ("field", "bad"),
+    [
+        ("dish_back_m", "0.0"),
+        ("dish_back_m", float("nan")),
+        ("dish_back_m", [0.0]),
+        ("branch_refused_ns", 1.5e9),
+        ("branch_refused_ns", -1),
+        ("branch_refused_ns", True),
+    ],
+)
+def test_a_journal_with_a_bad_dish_place_or_refusal_stamp_starts_afresh(
+    tmp_path: Path, field: str, bad: object
+) -> None:
     data = json.loads(jr.dump(book_with_two(), 2, None))
-    data["records"][1]["dish_back_m"] = bad
+    data["records"][1][field] = bad
     path = tmp_path / "planner.json"
     path.write_text(json.dumps(data))
     b = FruitBook(same_fruit_m=0.04, replan_m=0.015)
     assert jr.load(path, b) is None and b.records == {}
-    del data["records"][1]["dish_back_m"]  # a journal from before the field: the pose rule
+    del data["records"][1][field]  # a journal from before the field: the rule, no refusal
     path.write_text(json.dumps(data))
-    assert jr.load(path, b) is not None and b.records[4].dish_back_m is None
+    assert jr.load(path, b) is not None and getattr(b.records[4], field) is None

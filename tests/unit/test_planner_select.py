@@ -57,11 +57,12 @@ def core_with(order: str, *fruits: Fruit, **settings: object) -> PlannerCore:
     return core
 
 
-def select(core: PlannerCore) -> int | None:
-    """Run the selection; the selected fruit's ID (None: nothing selected)."""
+def select(core: PlannerCore, at_s: float = 0.0) -> int | None:
+    """Run the selection at sim time ``at_s``; the selected fruit's ID (None: nothing
+    selected)."""
     m = core.machine
     m.target = None
-    m._select(0)
+    m._select(round(at_s * 1e9))
     return m.target.fruit_id if m.target is not None else None
 
 
