@@ -127,6 +127,23 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="DIR",
         help="write each run's harvest and sim events to DIR/ORDER-SEED.jsonl (diagnosis)",
     )
+    h.add_argument(
+        "--rows",
+        type=Path,
+        metavar="FILE",
+        help="append each finished run's row to FILE (JSON lines) and take the runs FILE "
+        "already holds for the same scenario, settings and commit from it: a bench stopped "
+        "part-way resumes (rows of uncommitted code are written, never reused)",
+    )
+    h.add_argument(
+        "--from-rows",
+        type=Path,
+        nargs="+",
+        metavar="FILE",
+        help="run nothing: the table (or --json) of the rows in these files (--rows of benches "
+        "run apart, e.g. seeds split over processes); rows of different settings or code "
+        "are refused",
+    )
     h.add_argument("--json", action="store_true", help="print one JSON object")
     h.set_defaults(func=cmd_bench_harvest)
 
@@ -185,13 +202,21 @@ def cmd_bench_harvest(args: argparse.Namespace) -> int:
     from services.planner.bench import (
         BenchConfig,
         BenchError,
+        from_rows,
         parse_seeds,
         parse_sets,
         run_harvest_bench,
         table,
     )
 
+    def say(line: str) -> None:
+        print(line, file=sys.stderr)
+
     try:
+        if args.from_rows:
+            result = from_rows(args.from_rows, say)
+            print(json.dumps(result, indent=2) if args.json else table(result))
+            return 0
         cfg = BenchConfig(
             args.scenario,
             parse_seeds(args.seeds),
@@ -202,6 +227,7 @@ def cmd_bench_harvest(args: argparse.Namespace) -> int:
             settings=parse_sets(args.set),
             jobs=args.jobs,
             events_dir=args.events_out,
+            rows_path=args.rows,
         )
         if cfg.jobs < 1:
             raise BenchError(f"--jobs must be at least 1, got {cfg.jobs}")
@@ -213,7 +239,9 @@ def cmd_bench_harvest(args: argparse.Namespace) -> int:
         bad = [o for o in cfg.orders if o not in ("nearest", "planned")]
         if bad:
             raise BenchError(f"unknown order policies {bad} (nearest, planned)")
-        result = run_harvest_bench(cfg, progress=lambda line: print(line, file=sys.stderr))
+        if cfg.rows_path is not None and cfg.rows_path.is_dir():
+            raise BenchError(f"--rows {cfg.rows_path}: a directory, not a rows file")
+        result = run_harvest_bench(cfg, progress=say)
     except BenchError as exc:
         print(f"harvest bench harvest: {exc}", file=sys.stderr)
         return 2

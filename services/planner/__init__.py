@@ -140,8 +140,9 @@ class Settings(ServiceSettings):
         ge=0,
         le=60,
         description="… a fruit refused is looked at again no sooner than this after the "
-        "refusal, the arms at the ready pose if nothing else is left (orchard seed 4: right "
-        "after a harvest, four fruit were refused and given up in the same tick), s.",
+        "refusal, the arms at the ready pose if nothing else is left (orchard seed 19: four "
+        "fruit refused as the arms left a stalled approach were given up in the same tick; "
+        "3 s later at the ready pose the three still listed were clear of the branches), s.",
     )
     branch_check_own_branch_m: float = Field(
         default=0.1,

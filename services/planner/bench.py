@@ -34,6 +34,16 @@ import numpy as np
 from schemas.harvest import RunSummary
 from schemas.scene import SceneState
 from schemas.sim import GroundTruth
+from services.planner.bench_rows import (
+    DIRTY,
+    RowsError,
+    append_row,
+    code_version,
+    combined,
+    read_rows,
+    reusable,
+    run_key,
+)
 
 CHAIN = ("detector", "tracker", "scene")
 SETTABLE = ("sim", *CHAIN, "controller", "planner")  # services a run's --set may reach
@@ -691,6 +701,8 @@ class BenchConfig:
     settings: dict[str, dict[str, Any]] = field(default_factory=dict)  # --set, by service
     jobs: int = 1  # inproc runs at once (processes)
     events_dir: Path | None = None  # --events-out: each run's events as JSON lines here
+    rows_path: Path | None = None  # --rows: each row kept there, and reused (bench_rows.py)
+    code: str | None = None  # the code the rows are of (None: git's; tests set it)
 
 
 def run_harvest_bench(
@@ -699,17 +711,28 @@ def run_harvest_bench(
     """Every (order, seed) run, ``cfg.jobs`` at a time (inproc runs in spawned processes: each
     run is deterministic on its own, so the rows do not depend on how many run at once)."""
     workdir = Path(tempfile.mkdtemp(prefix="bench-harvest-"))
-    todo = [(order, seed) for order in cfg.orders for seed in cfg.seeds]
-    rows: dict[tuple[str, int], dict[str, Any]] = {}
+    runs_all = [(order, seed) for order in cfg.orders for seed in cfg.seeds]
+    say = progress or (lambda _line: None)
+    key = run_key(
+        cfg.scenario,
+        cfg.mode,
+        cfg.fruit_count,
+        cfg.max_s,
+        cfg.settings,
+        cfg.code if cfg.code is not None else code_version(),
+    )
+    rows = _rows_kept(cfg, key, runs_all, say)
+    todo = [k for k in runs_all if k not in rows]
 
     def done(row: dict[str, Any]) -> None:
         rows[(row["order"], row["seed"])] = row
-        if progress is not None:
-            progress(
-                f"{row['order']} seed {row['seed']}: {row['harvested']}/{row['reachable']} "
-                f"harvested, {row['collisions']} collisions (+{row['target_contacts']} with the "
-                f"target), {row['sim_s']:.1f} s sim in {row['wall_s']:.0f} s"
-            )
+        if cfg.rows_path is not None:
+            append_row(cfg.rows_path, key, row)
+        say(
+            f"{row['order']} seed {row['seed']}: {row['harvested']}/{row['reachable']} "
+            f"harvested, {row['collisions']} collisions (+{row['target_contacts']} with the "
+            f"target), {row['sim_s']:.1f} s sim in {row['wall_s']:.0f} s"
+        )
 
     parallel = cfg.jobs > 1 and cfg.mode == "inproc" and len(todo) > 1
     if parallel:
@@ -724,14 +747,57 @@ def run_harvest_bench(
     else:
         for order, seed in todo:
             done(run_one(cfg, order, seed, workdir))
-    runs = [rows[k] for k in todo]
+    runs = [rows[k] for k in runs_all]
     return {
         "scenario": cfg.scenario,
         "seeds": cfg.seeds,
         "mode": cfg.mode,
         "fruit_count": cfg.fruit_count,
         "settings": cfg.settings,
+        "code": key["code"],
         "policies": {o: aggregate([r for r in runs if r["order"] == o]) for o in cfg.orders},
+        "runs": runs,
+    }
+
+
+def _rows_kept(
+    cfg: BenchConfig,
+    key: dict[str, Any],
+    runs: list[tuple[str, int]],
+    say: Callable[[str], None],
+) -> dict[tuple[str, int], dict[str, Any]]:
+    """The rows of ``runs`` that ``cfg.rows_path`` already holds under ``key``."""
+    if cfg.rows_path is None:
+        return {}
+    kept = read_rows(cfg.rows_path)
+    for line in kept.skipped:
+        say(line)
+    if str(key["code"]).endswith(DIRTY):
+        say(f"{cfg.rows_path}: the code has uncommitted changes: rows are written, none reused")
+    reuse = reusable(kept, key)
+    got = {k: reuse[k] for k in runs if k in reuse}
+    for order, seed in got:
+        say(f"{order} seed {seed}: the row in {cfg.rows_path}")
+    return got
+
+
+def from_rows(paths: list[Path], progress: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """The bench's result from rows files (``--from-rows``): no run, the table of the rows."""
+    try:
+        key, runs, skipped = combined(paths)
+    except RowsError as exc:
+        raise BenchError(str(exc)) from None
+    for line in skipped:
+        (progress or (lambda _line: None))(line)
+    orders = list(dict.fromkeys(r["order"] for r in runs))
+    return {
+        "scenario": key["scenario"],
+        "seeds": sorted({r["seed"] for r in runs}),
+        "mode": key["mode"],
+        "fruit_count": key["fruit_count"],
+        "settings": key["settings"],
+        "code": key["code"],
+        "policies": {o: aggregate([r for r in runs if r["order"] == o]) for o in orders},
         "runs": runs,
     }
 
@@ -868,6 +934,17 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
+def seed_ranges(seeds: Sequence[int]) -> str:
+    """``0-7,10,12-13``: the seeds as parse_seeds reads them back."""
+    spans: list[list[int]] = []
+    for s in sorted(set(seeds)):
+        if spans and s == spans[-1][1] + 1:
+            spans[-1][1] = s
+        else:
+            spans.append([s, s])
+    return ",".join(f"{a}" if a == b else f"{a}-{b}" for a, b in spans)
+
+
 def table(result: dict[str, Any]) -> str:
     """A plain-text table of the per-policy figures."""
     keys = (
@@ -907,7 +984,7 @@ def table(result: dict[str, Any]) -> str:
     )
     pols = result["policies"]
     lines = [
-        f"{result['scenario']} seeds {result['seeds'][0]}-{result['seeds'][-1]} ({result['mode']})",
+        f"{result['scenario']} seeds {seed_ranges(result['seeds'])} ({result['mode']})",
         f"{'':34}" + "".join(f"{o:>14}" for o in pols),
     ]
     for k, label in keys:

@@ -674,9 +674,10 @@ class Machine:
 
     def _rechecks(self, cands: list[FruitRecord], now: int) -> list[FruitRecord]:
         """Candidates the branch check refused less than ``branch_check_recheck_s`` ago: not
-        looked at again yet. Right after a harvest the arms stood in front of the tree and what
-        they hid reads as occupied space until a view from the ready pose clears it (orchard
-        seed 4: four fruit refused and given up in the same tick, 95–107 mm deep)."""
+        looked at again yet. The arms stood in front of the tree, and what they hid reads as
+        occupied space until a view from the ready pose clears it (orchard seed 19 at 37.3 s:
+        four fruit refused 20–52 mm deep as a stalled approach ended were given up in the same
+        tick; at the ready pose 3 s later the three still listed were clear)."""
         wait_ns = round(self.s.branch_check_recheck_s * NS)
         return [
             r
