@@ -31,9 +31,12 @@ def code_version(repo: Path = REPO) -> str:
     """The commit of ``repo`` (``+dirty`` when tracked files differ from it); ``unknown`` when
     it is no git checkout (an installed copy): such rows are never reused either."""
     try:
+        top = _git(repo, "rev-parse", "--show-toplevel")
         head = _git(repo, "rev-parse", "HEAD")
         dirty = _git(repo, "status", "--porcelain", "--untracked-files=no")
-    except (OSError, subprocess.CalledProcessError):
+    except (OSError, subprocess.CalledProcessError, subprocess.TimeoutExpired):
+        return "unknown" + DIRTY
+    if Path(top).resolve() != repo.resolve():  # an installed copy inside some other checkout
         return "unknown" + DIRTY
     return head + (DIRTY if dirty else "")
 
