@@ -6,7 +6,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from schemas.base import ArmRole, FiniteFloat, Frozen, Message, NonNegFloat
+from schemas.base import ArmRole, FiniteFloat, Frozen, Message, NonNegFloat, Vec3
 
 
 class ArmJointState(Frozen):
@@ -27,10 +27,24 @@ class ArmJointState(Frozen):
         return self
 
 
+class SensedContact(Frozen):
+    """An external contact one robot link feels (the LWR4's joint-torque observer isolates the
+    link and estimates the point; the sim's estimate is exact)."""
+
+    link: str = Field(min_length=1, description="The robot link in contact (URDF link name).")
+    point_world_m: Vec3 = Field(description="Where on the link it is touched, world frame, m.")
+
+
 class JointState(Message):
     """Joint state of both arms at one control tick (the lock-step clock of the robot)."""
 
     arms: dict[ArmRole, ArmJointState] = Field(description="Joint state per arm role.")
+    contacts: tuple[SensedContact, ...] = Field(
+        default=(),
+        description="External contacts felt at this tick: the trunk, branches, fruit on the "
+        "tree; not the fruit the dish carries nor one falling into it (the load cell's). One "
+        "per link and body touched, in link order. Empty: none (or no sensing).",
+    )
 
 
 class ArmJointVelocity(Frozen):

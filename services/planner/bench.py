@@ -498,6 +498,7 @@ FATE_RULES: tuple[tuple[str, str, str], ...] = (
     ("unreachable", "out of reach", "out_of_reach"),
     ("unreachable", "a branch in the tools' way", "branch_refused"),
     ("unreachable", "a fruit the detector has not found in the tools' way", "unseen_fruit_refused"),
+    ("unreachable", "something the arms felt in the tools' way", "felt_refused"),
     ("cut_failed", "", "cut_failed"),
     ("dropped", "", "dropped"),
     ("lost", "", "lost"),

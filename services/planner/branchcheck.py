@@ -49,6 +49,7 @@ from services.planner.poses import FruitShape, ToolPoses
 TOOL_JOINTS = ("cutter_j7", "collector_j7")  # the bodies they carry are measured
 START_S = 0.5  # spheres first listed this soon after the first scene state were there at start
 UNSEEN_FRUIT_PREFIX = "unseen_fruit_"  # the scene's names for fruit-coloured occupied space
+TOUCHED_PREFIX = "touched_"  # … for what the arms felt (scene contact_obstacles)
 
 
 @dataclass(frozen=True)
@@ -64,12 +65,13 @@ class BranchVerdict:
     sphere: str = ""
 
     def why(self) -> str:
-        # The scene's unseen-fruit spheres are fruit no estimate explains, not branches.
-        what = (
-            "a fruit the detector has not found"
-            if self.sphere.startswith(UNSEEN_FRUIT_PREFIX)
-            else "a branch"
-        )
+        # The scene's unseen-fruit spheres are fruit no estimate explains, and its touched
+        # ones what the arms felt: not branches seen.
+        what = "a branch"
+        if self.sphere.startswith(UNSEEN_FRUIT_PREFIX):
+            what = "a fruit the detector has not found"
+        elif self.sphere.startswith(TOUCHED_PREFIX):
+            what = "something the arms felt"
         return (
             f"{what} in the tools' way at the {self.pose} (the clearest of {self.solutions} "
             f"IK solutions puts a tool {self.depth_m * 1e3:.0f} mm into the occupied space seen)"

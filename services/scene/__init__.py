@@ -321,6 +321,18 @@ class Settings(ServiceSettings):
         description="At most this many spheres (the most recently hit): the controller refuses "
         "scenes over its max_obstacles (500) with the fruit and the trunk.",
     )
+    contact_obstacles: bool = Field(
+        default=False,
+        description="Keep what the arms felt (the joint states' contacts, outside the selected "
+        "fruit's inner working space) as sphere obstacles 'touched_…' beside the branches', "
+        "split by the same keep-out; forgotten where a fruit is harvested (touched.py).",
+    )
+    contact_voxel_m: float = Field(
+        default=0.03, gt=0.005, le=0.2, description="… felt points are binned at this size, m."
+    )
+    contact_sphere_radius_m: float = Field(
+        default=0.02, ge=0.002, le=0.1, description="… a felt voxel's sphere radius, m."
+    )
     occupancy_unseen_fruit: bool = Field(
         default=False,
         description="Also keep fruit-coloured depth points that no fruit estimate explains (a "

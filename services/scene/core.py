@@ -42,6 +42,7 @@ from services.scene.fruit_list import Entry, FruitList, ListParams, Measurement
 from services.scene.geometry import Pinhole, PoseError, RigidTransform, vec3
 from services.scene.obstacles import build_obstacles, trunk_radius_m
 from services.scene.occupancy import OccupancyGrid, OccupancyParams
+from services.scene.touched import TouchedParams, TouchedSpace
 from services.scene.trunk import TrunkFailure, TrunkParams, measure_trunk
 from services.scene.trunk_track import TrackParams, TrunkTrack
 
@@ -126,6 +127,11 @@ class SceneCore:
             blank_frames=s.occupancy_blank_frames,
         )
         self.occupancy = OccupancyGrid(params) if s.occupancy else None
+        self.touched = (
+            TouchedSpace(TouchedParams(s.contact_voxel_m, s.contact_sphere_radius_m))
+            if s.contact_obstacles
+            else None
+        )
         self.unseen = (
             OccupancyGrid(
                 dataclasses.replace(
@@ -158,6 +164,8 @@ class SceneCore:
         if topic == "camera/rgbd":
             self._keep_frame(msg)
         elif topic == "robot/joint_state":
+            if self.touched is not None and msg.contacts:
+                self._feel(msg)
             if self.body is None:
                 return []
             self._keep_joints(msg)
@@ -207,7 +215,44 @@ class SceneCore:
         while len(self.frames) > self.s.frame_buffer:
             self.frames.popitem(last=False)
 
+    def _feel(self, js: JointState) -> None:
+        """Keep the contacts the arms felt, but those on the selected fruit (touched on
+        purpose: the shears at its peduncle, the dish under it)."""
+        assert self.touched is not None
+        inner = self._inner_space(self._selected())
+        self.counters["contacts_felt"] += len(js.contacts)
+        self.counters["contacts_kept"] += self.touched.feel(js.contacts, js.header.stamp_ns, inner)
+
+    def _inner_space(self, selected: Entry | None) -> list[Capsule]:
+        """The selected fruit's inner working space: round it and up its twig (the keep-out's
+        inner part, ``occupancy_inner_clearance_m``), as capsules; none without a selection."""
+        if selected is None:
+            return []
+        st = selected.state
+        centre = st.position_world_m
+        top = centre + np.array([0.0, 0.0, st.semi_axis_v_m + self.s.occupancy_inner_twig_m])
+        return [(centre, top, st.semi_axis_v_m + self.s.occupancy_inner_clearance_m)]
+
+    def _selected(self) -> Entry | None:
+        """The fruit the tools work on: as it hung at the cut, or the planner's target."""
+        if self.cut_entry is not None:
+            return self.cut_entry
+        sid = self.fruits.selected(self.target)
+        return self.fruits.entries.get(sid) if sid is not None else None
+
+    def _forget_felt(self, ev: HarvestEvent) -> None:
+        """A fruit harvested: what the arms felt on it is gone with it."""
+        if self.touched is None or ev.event not in HARVESTED_EVENTS or ev.fruit_id is None:
+            return
+        e = self.cut_entry if self.cut_entry is not None else self.fruits.entries.get(ev.fruit_id)
+        if e is not None:
+            radius_m = e.state.semi_axis_v_m + self.s.occupancy_inner_clearance_m
+            self.counters["contacts_forgotten"] += self.touched.forget_within(
+                e.state.position_world_m, radius_m
+            )
+
     def _take_event(self, ev: HarvestEvent) -> None:
+        self._forget_felt(ev)
         if ev.event == "run_finished":
             self.target, self.cut_entry = None, None
         if ev.fruit_id is None:
@@ -459,10 +504,9 @@ class SceneCore:
         entries = self.fruits.sorted_entries()
         if self.cut_entry is not None:
             selected_id: int | None = self.cut_entry.fruit_id
-            selected: Entry | None = self.cut_entry
         else:
             selected_id = self.fruits.selected(self.target)
-            selected = self.fruits.entries.get(selected_id) if selected_id is not None else None
+        selected = self._selected()
         fruits = tuple(self._fruit(e, selected_id) for e in entries)
         harvested = {k for k, m in self.fruits.marks.items() if m == "harvested"}
         obstacles = build_obstacles(
@@ -474,9 +518,9 @@ class SceneCore:
             self.s.trunk_tool_margin_m,
         )
         near: tuple[SphereObstacle, ...] = ()
-        if self.occupancy is not None:
+        if self.occupancy is not None or self.touched is not None:
             keep_out = self._keep_out(selected)
-            grids = [g for g in (self.occupancy, self.unseen) if g is not None]
+            grids = [g for g in (self.occupancy, self.unseen, self.touched) if g is not None]
             near = tuple(sp for g in grids for sp in g.within(*keep_out))
             spheres = tuple(sp for g in grids for sp in g.obstacles(*keep_out))
             spheres += self._near_shown(selected, near)
@@ -522,17 +566,14 @@ class SceneCore:
         r = self.s.occupancy_near_radius_m
         if r <= 0 or selected is None:
             return ()
-        st = selected.state
-        centre = st.position_world_m
-        top = centre + np.array([0.0, 0.0, st.semi_axis_v_m + self.s.occupancy_inner_twig_m])
-        inner_m = st.semi_axis_v_m + self.s.occupancy_inner_clearance_m
+        inner = self._inner_space(selected)
+        inner_m = inner[0][2]
         # the occupancy grid's own keep-out test (a sphere's surface within the capsule), on
         # the spheres already found near rather than a second pass over the whole grid
         return tuple(
             sp.model_copy(update={"radius_m": r})
             for sp in near
-            if axis_distances_m(np.array(sp.center_world_m), [(centre, top, inner_m)])[0]
-            >= inner_m + sp.radius_m
+            if axis_distances_m(np.array(sp.center_world_m), inner)[0] >= inner_m + sp.radius_m
         )
 
     def _to_cam(self, p_world: np.ndarray) -> np.ndarray:

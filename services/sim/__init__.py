@@ -36,6 +36,12 @@ class Settings(ServiceSettings):
     render_cache: bool = Field(
         default=True, description="Cache still objects between frames (same pixels, faster)."
     )
+    contact_sensing: bool = Field(
+        default=True,
+        description="Each joint state carries the external contacts the arms feel "
+        "(JointState.contacts: the link and the point, as an LWR4's joint-torque observer "
+        "would estimate them; here exact). False: always empty.",
+    )
     cut_tolerance_m: float = Field(
         default=0.015, gt=0, le=0.1, description="Cutter tip to peduncle distance for a cut, m."
     )

@@ -22,6 +22,7 @@ from schemas.robot import (
     BasketState,
     JointState,
     JointVelocityCommand,
+    SensedContact,
     ToolCommand,
 )
 from schemas.sim import GroundTruth, SimCounters, SimEvent, TrunkTruth
@@ -92,6 +93,7 @@ class SimCore:
         self.cut_requested = False
         self.shears_open = True
         self.contacts: dict[tuple[str, str], int] = {}
+        self.felt: list[tuple[str, tuple[float, float, float]]] = []  # (link, point): sensed
         self.clamped_last: list[str] = []
         self.physics.set_robot(self.q, self.qd)
 
@@ -195,7 +197,10 @@ class SimCore:
     def _count_contacts(self) -> None:
         bodies = self.physics.tree_bodies | self.fruits.attached_bodies()
         names = self.physics.names
-        now = {(link, names[b]) for link, b in self.physics.robot_contacts() if b in bodies}
+        points = {k: p for k, p in self.physics.robot_contact_points().items() if k[1] in bodies}
+        now = {(link, names[b]) for link, b in points}
+        # What the arms feel (JointState.contacts): one point per link and body, in link order.
+        self.felt = [(k[0], points[k]) for k in sorted(points, key=lambda k: (k[0], names[k[1]]))]
         for pair in sorted(now - set(self.contacts)):
             self.counters["contacts"] += 1
             self.pending.append(Ev("collision", None, pair[0], pair[1], "contact began"))
@@ -230,7 +235,12 @@ class SimCore:
                 position_rad=tuple(float(v) for v in self.q[sl]),
                 velocity_rad_s=tuple(float(v) for v in self.qd[sl]),
             )
-        return JointState(header=self.stamper.header("robot/joint_state", stamp), arms=arms)
+        felt = self.felt if self.s.contact_sensing else []
+        return JointState(
+            header=self.stamper.header("robot/joint_state", stamp),
+            arms=arms,
+            contacts=tuple(SensedContact(link=link, point_world_m=p) for link, p in felt),
+        )
 
     def basket(self, stamp: int) -> BasketState:
         """The collecting tool's load cell (a robot-side sensor, unlike sim/truth)."""

@@ -175,12 +175,19 @@ class Physics:
 
     def robot_contacts(self) -> list[tuple[str, int]]:
         """(robot link name, other body id) pairs in contact, sorted, without repeats."""
-        pairs = {
-            (self.link_name[cp[3]], cp[2])
-            for cp in self.pb.getContactPoints(bodyA=self.robot, physicsClientId=self.cid)
-            if cp[2] != self.robot and cp[8] < TOUCH_M
-        }
-        return sorted(pairs)
+        return sorted(self.robot_contact_points())
+
+    def robot_contact_points(self) -> dict[tuple[str, int], tuple[float, float, float]]:
+        """(robot link name, other body id) → the point on the link of the pair's deepest
+        contact, world frame, m."""
+        best: dict[tuple[str, int], tuple[float, tuple[float, float, float]]] = {}
+        for cp in self.pb.getContactPoints(bodyA=self.robot, physicsClientId=self.cid):
+            if cp[2] == self.robot or cp[8] >= TOUCH_M:
+                continue
+            key = (self.link_name[cp[3]], cp[2])
+            if key not in best or cp[8] < best[key][0]:
+                best[key] = (cp[8], tuple(float(v) for v in cp[5]))  # type: ignore[assignment]
+        return {k: p for k, (_d, p) in best.items()}
 
     def tree_contacts_at(self, q: np.ndarray) -> list[tuple[str, str]]:
         """(robot link, tree body) pairs that would touch with the joints at ``q``

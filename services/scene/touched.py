@@ -1,0 +1,143 @@
+"""Occupied space the arms felt: the contacts of the joint states (``JointState.contacts``, the
+LWR4's joint-torque observer), kept as sphere obstacles beside the branches the camera sees.
+
+What the camera cannot see the arms can still touch: a fruit behind leaves that the detector
+never finds, or a branch hidden by fruit, is met on approach after approach (session 41, orchard,
+14 seeds: about 60 % of the contacts touched a body the robot had already touched in that run;
+seed 8's hidden fruit 14 was touched 21 times by every link of both arms). A felt point is
+where the link met the thing, on its surface, so a small sphere there is the part of it known.
+
+Each contact point is binned in a world-frame voxel grid (``voxel_m``); a voxel's obstacle is a
+sphere of ``sphere_radius_m`` at the mean of the points felt in it. The fruit being harvested is
+touched on purpose (the shears at its peduncle, the dish under it): points inside its working
+space are not kept. A voxel is forgotten when the fruit it lay on is harvested (its place is
+free) and, like the camera's voxels, it is split by the keep-out round the selected fruit into
+obstacles and near spheres (``obstacles`` / ``within``)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from schemas.robot import SensedContact
+from schemas.scene import SphereObstacle
+from services.robot.clearance import Capsule, axis_distances_m
+
+PREFIX = "touched_"  # the names of its spheres: the planner tells them from branches
+
+
+@dataclass(frozen=True)
+class TouchedParams:
+    voxel_m: float = 0.03
+    sphere_radius_m: float = 0.02
+    max_obstacles: int = 64
+
+
+@dataclass
+class _Felt:
+    sum_m: np.ndarray
+    n: int
+    last_ns: int
+
+    @property
+    def center_m(self) -> np.ndarray:
+        return self.sum_m / self.n
+
+
+class TouchedSpace:
+    """The voxels felt so far (see the module)."""
+
+    def __init__(self, p: TouchedParams) -> None:
+        self.p = p
+        self.voxels: dict[tuple[int, int, int], _Felt] = {}
+
+    def feel(
+        self, contacts: Iterable[SensedContact], stamp_ns: int, ignore: Sequence[Capsule] = ()
+    ) -> int:
+        """Keep the points of ``contacts`` outside the ``ignore`` capsules (the selected fruit's
+        working space); returns how many were kept. A point too far out to bin is left out."""
+        kept = 0
+        radii = np.array([r for _a, _b, r in ignore])
+        for c in contacts:
+            p = np.asarray(c.point_world_m, dtype=float)
+            if ignore and bool(np.any(axis_distances_m(p, ignore) < radii)):
+                continue
+            key = self._key(p)
+            if key is None:
+                continue
+            v = self.voxels.get(key)
+            if v is None:
+                self.voxels[key] = _Felt(p.copy(), 1, stamp_ns)
+            else:
+                v.sum_m += p
+                v.n += 1
+                v.last_ns = stamp_ns
+            kept += 1
+        return kept
+
+    def forget_within(self, centre_m: np.ndarray, radius_m: float) -> int:
+        """Forget the voxels whose point mean lies within ``radius_m`` of ``centre_m`` (a fruit
+        harvested there: what was felt on it is gone); returns how many."""
+        gone = [
+            k
+            for k, v in self.voxels.items()
+            if float(np.linalg.norm(v.center_m - centre_m)) <= radius_m
+        ]
+        for k in gone:
+            del self.voxels[k]
+        return len(gone)
+
+    def obstacles(
+        self,
+        keep_out: Sequence[Capsule] = (),
+        inside_cylinder: tuple[np.ndarray, float] | None = None,
+    ) -> tuple[SphereObstacle, ...]:
+        """The spheres outside the keep-out and the trunk cylinder (OccupancyGrid.obstacles)."""
+        return self._spheres("occupied", False, keep_out, inside_cylinder)
+
+    def within(
+        self,
+        keep_out: Sequence[Capsule],
+        inside_cylinder: tuple[np.ndarray, float] | None = None,
+    ) -> tuple[SphereObstacle, ...]:
+        """The spheres the keep-out leaves out of ``obstacles`` (OccupancyGrid.within)."""
+        return self._spheres("near", True, keep_out, inside_cylinder)
+
+    def _spheres(
+        self,
+        name: str,
+        in_keep_out: bool,
+        keep_out: Sequence[Capsule],
+        inside_cylinder: tuple[np.ndarray, float] | None,
+    ) -> tuple[SphereObstacle, ...]:
+        r = self.p.sphere_radius_m
+        radii = np.array([kr for _a, _b, kr in keep_out])
+        kept: list[tuple[int, tuple[int, int, int], np.ndarray]] = []
+        for key, v in self.voxels.items():
+            c = v.center_m
+            inside = bool(keep_out) and bool(np.any(axis_distances_m(c, keep_out) < radii + r))
+            if inside != in_keep_out:
+                continue
+            if inside_cylinder is not None:
+                axis, radius = inside_cylinder
+                if float(np.hypot(c[0] - axis[0], c[1] - axis[1])) < radius:
+                    continue
+            kept.append((-v.last_ns, key, c))
+        kept.sort(key=lambda t: (t[0], t[1]))  # the most recently felt first, then by voxel
+        return tuple(
+            SphereObstacle(
+                name=f"{PREFIX}{name}_{i}",
+                center_world_m=(float(c[0]), float(c[1]), float(c[2])),
+                radius_m=r,
+            )
+            for i, (_t, _k, c) in enumerate(kept[: self.p.max_obstacles])
+        )
+
+    def _key(self, p: np.ndarray) -> tuple[int, int, int] | None:
+        scaled = p / self.p.voxel_m
+        if not np.all(np.isfinite(scaled)) or np.any(np.abs(scaled) > 1e9):
+            return None
+        i, j, k = (int(v) for v in np.floor(scaled))
+        return i, j, k
