@@ -28,8 +28,9 @@ class ArmJointState(Frozen):
 
 
 class SensedContact(Frozen):
-    """An external contact one robot link feels (the LWR4's joint-torque observer isolates the
-    link and estimates the point; the sim's estimate is exact)."""
+    """An external contact one robot link feels (an LWR4 joint-torque observer's estimate)."""
+
+    # The observer isolates the link and estimates the point; the sim's estimate is exact.
 
     link: str = Field(min_length=1, description="The robot link in contact (URDF link name).")
     point_world_m: Vec3 = Field(description="Where on the link it is touched, world frame, m.")
