@@ -646,9 +646,10 @@ class Machine:
         first_blocked: tuple[FruitRecord, list[FruitRecord]] | None = None
         newly_deferred = False
         pending = self._rechecks(cands, now)
+        waiting = {r.key for r in pending}
         for i in nearest_first([r.seen.distance_m for r in cands]):
             rec = cands[i]
-            if rec in pending:
+            if rec.key in waiting:
                 continue
             if not self._check_reach(rec, now):
                 return None
