@@ -320,24 +320,47 @@ class OccupancyGrid:
     ) -> tuple[SphereObstacle, ...]:
         """The voxels inside (``in_keep_out``) or outside the keep-out and outside the
         cylinder, as spheres ``<name>_<k>``, most recently hit first, at most max_obstacles."""
-        r = self.p.sphere_radius_m
-        radii = np.array([kr for _a, _b, kr in keep_out])
-        kept: list[tuple[int, tuple[int, int, int], np.ndarray]] = []
-        for key, vox in self.voxels.items():
-            c = vox.center_m
-            inside = bool(np.any(axis_distances_m(c, keep_out) < radii + r))
-            if inside != in_keep_out:
-                continue
-            if inside_cylinder is not None:
-                axis, radius = inside_cylinder
-                if float(np.hypot(c[0] - axis[0], c[1] - axis[1])) < radius:
-                    continue
-            kept.append((-vox.last_hit_frame, key, c))
-        kept.sort(key=lambda t: (t[0], t[1]))
-        return tuple(
-            SphereObstacle(name=f"{self.prefix}{name}_{i}", center_world_m=vec3(c), radius_m=r)
-            for i, (_f, _k, c) in enumerate(kept[: self.p.max_obstacles])
+        voxels = [(-v.last_hit_frame, key, v.center_m) for key, v in self.voxels.items()]
+        return keep_out_spheres(
+            voxels,
+            f"{self.prefix}{name}",
+            self.p.sphere_radius_m,
+            (in_keep_out, keep_out, inside_cylinder),
+            self.p.max_obstacles,
         )
+
+
+KeepOutTest = tuple[bool, Sequence[Capsule], tuple[np.ndarray, float] | None]
+
+
+def keep_out_spheres(
+    voxels: list[tuple[int, tuple[int, int, int], np.ndarray]],
+    name: str,
+    r: float,
+    test: KeepOutTest,
+    max_n: int,
+) -> tuple[SphereObstacle, ...]:
+    """``voxels`` ((order, key, centre): the lowest order first, then by key) inside or outside
+    the keep-out (``test``: (inside wanted, capsules, trunk cylinder); a sphere whose surface
+    comes within a capsule is inside, one centred inside the cylinder is left out either way),
+    as spheres ``<name>_<k>`` of radius ``r``, at most ``max_n``."""
+    in_keep_out, keep_out, inside_cylinder = test
+    radii = np.array([kr for _a, _b, kr in keep_out])
+    kept: list[tuple[int, tuple[int, int, int], np.ndarray]] = []
+    for order, key, c in voxels:
+        inside = bool(keep_out) and bool(np.any(axis_distances_m(c, keep_out) < radii + r))
+        if inside != in_keep_out:
+            continue
+        if inside_cylinder is not None:
+            axis, radius = inside_cylinder
+            if float(np.hypot(c[0] - axis[0], c[1] - axis[1])) < radius:
+                continue
+        kept.append((order, key, c))
+    kept.sort(key=lambda t: (t[0], t[1]))
+    return tuple(
+        SphereObstacle(name=f"{name}_{i}", center_world_m=vec3(c), radius_m=r)
+        for i, (_o, _k, c) in enumerate(kept[:max_n])
+    )
 
 
 def _points_world(

@@ -24,6 +24,7 @@ import numpy as np
 from schemas.robot import SensedContact
 from schemas.scene import SphereObstacle
 from services.robot.clearance import Capsule, axis_distances_m
+from services.scene.occupancy import keep_out_spheres
 
 PREFIX = "touched_"  # the names of its spheres: the planner tells them from branches
 
@@ -112,27 +113,11 @@ class TouchedSpace:
         keep_out: Sequence[Capsule],
         inside_cylinder: tuple[np.ndarray, float] | None,
     ) -> tuple[SphereObstacle, ...]:
-        r = self.p.sphere_radius_m
-        radii = np.array([kr for _a, _b, kr in keep_out])
-        kept: list[tuple[int, tuple[int, int, int], np.ndarray]] = []
-        for key, v in self.voxels.items():
-            c = v.center_m
-            inside = bool(keep_out) and bool(np.any(axis_distances_m(c, keep_out) < radii + r))
-            if inside != in_keep_out:
-                continue
-            if inside_cylinder is not None:
-                axis, radius = inside_cylinder
-                if float(np.hypot(c[0] - axis[0], c[1] - axis[1])) < radius:
-                    continue
-            kept.append((-v.last_ns, key, c))
-        kept.sort(key=lambda t: (t[0], t[1]))  # the most recently felt first, then by voxel
-        return tuple(
-            SphereObstacle(
-                name=f"{PREFIX}{name}_{i}",
-                center_world_m=(float(c[0]), float(c[1]), float(c[2])),
-                radius_m=r,
-            )
-            for i, (_t, _k, c) in enumerate(kept[: self.p.max_obstacles])
+        # the most recently felt first, then by voxel: deterministic
+        voxels = [(-v.last_ns, key, v.center_m) for key, v in self.voxels.items()]
+        test = (in_keep_out, keep_out, inside_cylinder)
+        return keep_out_spheres(
+            voxels, f"{PREFIX}{name}", self.p.sphere_radius_m, test, self.p.max_obstacles
         )
 
     def _key(self, p: np.ndarray) -> tuple[int, int, int] | None:
