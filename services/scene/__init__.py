@@ -322,16 +322,21 @@ class Settings(ServiceSettings):
         "scenes over its max_obstacles (500) with the fruit and the trunk.",
     )
     contact_obstacles: bool = Field(
-        default=False,
+        default=True,
         description="Keep what the arms felt (the joint states' contacts, outside the selected "
         "fruit's inner working space) as sphere obstacles 'touched_…' beside the branches', "
-        "split by the same keep-out; forgotten where a fruit is harvested (touched.py).",
+        "split by the same keep-out; forgotten where a fruit is harvested (touched.py). On "
+        "seven orchard seeds: 69 collisions against 153, 22 of 38 reachable fruit against 23.",
     )
     contact_voxel_m: float = Field(
         default=0.03, gt=0.005, le=0.2, description="… felt points are binned at this size, m."
     )
     contact_sphere_radius_m: float = Field(
-        default=0.02, ge=0.002, le=0.1, description="… a felt voxel's sphere radius, m."
+        default=0.035,
+        ge=0.002,
+        le=0.1,
+        description="… a felt voxel's sphere radius (0.02 on seeds 8, 9, 12: the dampers pushed "
+        "the dish off one new sphere after another, 42 contacts with one branch), m.",
     )
     occupancy_unseen_fruit: bool = Field(
         default=False,

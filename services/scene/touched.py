@@ -32,7 +32,7 @@ PREFIX = "touched_"  # the names of its spheres: the planner tells them from bra
 @dataclass(frozen=True)
 class TouchedParams:
     voxel_m: float = 0.03
-    sphere_radius_m: float = 0.02
+    sphere_radius_m: float = 0.035
     max_obstacles: int = 64
 
 
