@@ -186,7 +186,8 @@ class Physics:
                 continue
             key = (self.link_name[cp[3]], cp[2])
             if key not in best or cp[8] < best[key][0]:
-                best[key] = (cp[8], tuple(float(v) for v in cp[5]))  # type: ignore[assignment]
+                on_link = (float(cp[5][0]), float(cp[5][1]), float(cp[5][2]))
+                best[key] = (cp[8], on_link)
         return {k: p for k, (_d, p) in best.items()}
 
     def tree_contacts_at(self, q: np.ndarray) -> list[tuple[str, str]]:
