@@ -88,9 +88,8 @@ def read_rows(path: Path) -> Rows:
     for n, line in enumerate(lines, 1):
         if not line.strip():
             continue
-        why = _bad_line(line)
-        if why is None:
-            d = json.loads(line)
+        d, why = _parse(line)
+        if d is not None:
             got.lines.append((n, d["key"], d["row"]))
             continue
         if n == len(lines) and not text.endswith("\n"):
@@ -99,22 +98,22 @@ def read_rows(path: Path) -> Rows:
     return got
 
 
-def _bad_line(line: str) -> str | None:
-    """Why ``line`` is no row (None: it is one)."""
+def _parse(line: str) -> tuple[dict[str, Any] | None, str]:
+    """The line's ``{"key", "row"}`` object, or None and why it is no row."""
     try:
         d = json.loads(line)
     except json.JSONDecodeError as exc:
-        return f"not JSON ({exc.msg})"
+        return None, f"not JSON ({exc.msg})"
     if not isinstance(d, dict) or not isinstance(d.get("key"), dict):
-        return "no key object"
+        return None, "no key object"
     row = d.get("row")
     if not isinstance(row, dict):
-        return "no row object"
+        return None, "no row object"
     if not isinstance(row.get("order"), str) or type(row.get("seed")) is not int:
-        return "the row names no order and seed"
+        return None, "the row names no order and seed"
     if d["key"].get("version") != ROWS_VERSION:
-        return f"rows version {d['key'].get('version')!r}, expected {ROWS_VERSION}"
-    return None
+        return None, f"rows version {d['key'].get('version')!r}, expected {ROWS_VERSION}"
+    return d, ""
 
 
 def reusable(rows: Rows, key: dict[str, Any]) -> dict[tuple[str, int], dict[str, Any]]:
