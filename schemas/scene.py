@@ -89,11 +89,17 @@ class EllipsoidObstacle(Frozen):
 
 
 class SphereObstacle(Frozen):
-    """A sphere of occupied space seen in the depth image (branches), world frame."""
+    """A sphere of occupied space seen in the depth image (branches) or felt, world frame."""
 
     name: str = Field(description="Obstacle name, e.g. 'occupied_3'.")
     center_world_m: Vec3 = Field(description="Centre, world frame, m.")
     radius_m: PosFloat = Field(description="Radius, m.")
+    felt_on_fruit_id: int | None = Field(
+        default=None,
+        description="Felt spheres ('touched_…') only: the fruit the planner was working on every "
+        "time the arms felt this place (its own attempts); none when felt on several, with none "
+        "selected, or not felt.",
+    )
 
 
 class Obstacles(Frozen):

@@ -12,13 +12,16 @@ Each IK solution of the harvest pose and of the pre-pose (the planner's sampled 
 measured against every occupied sphere the scene shows, those inside the keep-out included
 (``SceneState.spheres_near_selected``), with the controller's own distances (freespace.py). A
 fruit whose clearest solution of either pose puts a tool deeper than ``depth_m`` into the
-spheres is refused. Two things are left out, both measured on runs (BENCHMARKS.md, Harvest,
-session 15):
+spheres is refused. Three things are left out, each measured on runs (BENCHMARKS.md, Harvest,
+sessions 15 and 41):
 
 * the arm links below the wrist: with the tool poses fixed the elbow can still swing, and the
   controller moves it round a branch the dampers show (paper-exp1 seed 11: every IK solution
   of a fruit the controller harvests cleanly put the collector's fifth link into a branch);
   only the bodies carried by each arm's last joint (wrist, cutter, dish) are measured;
+* what the arms felt only while working on this fruit (the scene's ``felt_on_fruit_id``): its
+  own branch, met by a stalled approach, which the dampers then steer round on the retry
+  (orchard seed 7, session 41: three fruit refused for it, 2 of 9 harvested against 7 of 9);
 * the fruit's own branch end: the cutter closes on the peduncle, a few centimetres from where
   the fruit's twig leaves its branch, so the spheres above the fruit's top within
   ``own_branch_m`` of it are that twig's, not something in the way (paper-exp1 seed 11: the
@@ -131,12 +134,16 @@ class BranchCheck:
         i, j, k = (int(v) for v in np.floor(scaled))
         return i, j, k
 
-    def in_the_way(self, fruit: FruitShape) -> tuple[SphereObstacle, ...]:
-        """The spheres that may stand in the tools' way for ``fruit``: all but its own twig's."""
+    def in_the_way(
+        self, fruit: FruitShape, fruit_ids: frozenset[int] = frozenset()
+    ) -> tuple[SphereObstacle, ...]:
+        """The spheres that may stand in the tools' way for ``fruit`` (whose track IDs are
+        ``fruit_ids``): all but its own twig's and those felt only on its own attempts."""
         top = fruit.centre_world_m + np.array([0.0, 0.0, fruit.d_v_m])
         return tuple(
             s
             for s in self.spheres
+            if s.felt_on_fruit_id is None or s.felt_on_fruit_id not in fruit_ids
             if not (
                 s.center_world_m[2] >= top[2]
                 and float(np.linalg.norm(np.asarray(s.center_world_m) - top)) <= self.own_branch_m
@@ -144,10 +151,15 @@ class BranchCheck:
         )
 
     def check(
-        self, kin: Kinematics, fruit: FruitShape, poses: list[tuple[str, ToolPoses]]
+        self,
+        kin: Kinematics,
+        fruit: FruitShape,
+        poses: list[tuple[str, ToolPoses]],
+        fruit_ids: frozenset[int] = frozenset(),
     ) -> BranchVerdict:
-        """The verdict on ``fruit`` whose tool poses are ``poses`` ((name, pose), in order)."""
-        spheres = self.in_the_way(fruit)
+        """The verdict on ``fruit`` (track IDs ``fruit_ids``) whose tool poses are ``poses``
+        ((name, pose), in order)."""
+        spheres = self.in_the_way(fruit, fruit_ids)
         if not spheres:
             return BranchVerdict(True)
         self.space.set_obstacles(Obstacles(spheres=spheres))

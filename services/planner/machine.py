@@ -961,14 +961,17 @@ class Machine:
         a refusal."""
         assert self.branches is not None
         rec.dish_back_m = None
-        verdict = self.branches.check(self.kin, rec.planned, [("harvest pose", h), ("pre-pose", p)])
+        ids = frozenset((rec.key, rec.fruit_id))
+        verdict = self.branches.check(
+            self.kin, rec.planned, [("harvest pose", h), ("pre-pose", p)], ids
+        )
         if verdict.clear or h.basket_back_m == 0.0 or not self.s.branch_check_dish_under:
             return verdict
         under = [replace(x, basket_back_m=0.0) for x in (h, p)]
         if not all(self.kin.reach(x).reachable for x in under):
             return verdict
         alt = self.branches.check(
-            self.kin, rec.planned, [("harvest pose", under[0]), ("pre-pose", under[1])]
+            self.kin, rec.planned, [("harvest pose", under[0]), ("pre-pose", under[1])], ids
         )
         if not alt.clear:
             return verdict

@@ -217,11 +217,15 @@ class SceneCore:
 
     def _feel(self, js: JointState) -> None:
         """Keep the contacts the arms felt, but those on the selected fruit (touched on
-        purpose: the shears at its peduncle, the dish under it)."""
+        purpose: the shears at its peduncle, the dish under it), with the fruit the planner
+        works on (none between attempts)."""
         assert self.touched is not None
         inner = self._inner_space(self._selected())
+        worked_on = self.cut_entry.fruit_id if self.cut_entry is not None else self.target
         self.counters["contacts_felt"] += len(js.contacts)
-        self.counters["contacts_kept"] += self.touched.feel(js.contacts, js.header.stamp_ns, inner)
+        self.counters["contacts_kept"] += self.touched.feel(
+            js.contacts, js.header.stamp_ns, inner, worked_on
+        )
 
     def _inner_space(self, selected: Entry | None) -> list[Capsule]:
         """The selected fruit's inner working space: round it and up its twig (the keep-out's

@@ -109,6 +109,37 @@ def test_an_unseen_fruit_in_the_way_is_named_as_such() -> None:
     )
 
 
+def test_what_was_felt_only_on_the_fruits_own_attempts_does_not_refuse_it() -> None:
+    """The scene's felt spheres carry the fruit whose attempts alone felt them: its own branch,
+    met by a stalled approach, left to the dampers; another fruit's, or anyone's, refuses it."""
+    core = checking()
+    assert core.machine.branches is not None
+    at = dish_level(core)
+
+    def felt_here(fid: int | None) -> SceneState:
+        return scene(
+            tuple(
+                SphereObstacle(
+                    name=f"touched_occupied_{k}",
+                    center_world_m=tuple(at + np.array([0, y, 0])),
+                    radius_m=0.035,
+                    felt_on_fruit_id=fid,
+                )
+                for k, y in enumerate((-0.03, 0.0, 0.03))
+            )
+        )
+
+    core.machine.branches.set_scene(felt_here(1))
+    assert select(core) == 1 and skips(core, 1) == []
+    for other in (3, None):
+        core = checking()
+        assert core.machine.branches is not None
+        core.machine.branches.set_scene(felt_here(other))
+        assert select(core) == 3
+        (first,) = skips(core, 1)
+        assert first.startswith("blocked: something the arms felt in the tools' way")
+
+
 def test_a_fruit_deferred_for_something_else_gets_its_own_second_look() -> None:
     """Deferred before (a stalled attempt, a blocker) and then refused by the check for the
     first time: it waits for another look at the branches, it is not given up at once."""

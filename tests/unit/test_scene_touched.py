@@ -38,6 +38,22 @@ def test_points_felt_become_spheres_but_not_in_the_fruits_own_space() -> None:
     assert t.feel(felt((1e12, 0.0, 0.0)), 20) == 0  # too far out to bin: left out
 
 
+def test_a_place_felt_only_on_one_fruits_attempts_carries_its_id() -> None:
+    t = TouchedSpace(TouchedParams(voxel_m=0.03, sphere_radius_m=0.02))
+    own, shared, between = (0.505, 0.105, 1.005), (0.605, 0.105, 1.005), (0.705, 0.105, 1.005)
+    t.feel(felt(own, shared), 10, fruit_id=4)
+    t.feel(felt(own), 20, fruit_id=4)  # the same fruit's retry: still its own
+    t.feel(felt(shared), 30, fruit_id=5)  # felt on another fruit's attempt too: anyone's
+    t.feel(felt(between), 40)  # between attempts: anyone's
+    by_place = {tuple(round(v, 3) for v in s.center_world_m): s for s in t.obstacles()}
+    assert by_place[own].felt_on_fruit_id == 4
+    assert by_place[shared].felt_on_fruit_id is None
+    assert by_place[between].felt_on_fruit_id is None
+    keep_out = [(np.array(own), np.array(own), 0.05)]  # inside the keep-out: still carried
+    (near,) = t.within(keep_out)
+    assert near.felt_on_fruit_id == 4
+
+
 def event(kind: str, fid: int, stamp_ns: int) -> HarvestEvent:
     return HarvestEvent(header=Header(stamp_ns=stamp_ns, seq=0, source="planner"), event=kind,
                         fruit_id=fid)  # fmt: skip
@@ -70,6 +86,7 @@ def test_the_scene_keeps_what_the_arms_felt_and_forgets_it_with_the_fruit() -> N
     assert state.selected_fruit_id == 1
     (s,) = touched(state)  # the target's own underside is touched on purpose: not kept
     assert s.name == "touched_occupied_0" and np.allclose(s.center_world_m, hidden)
+    assert s.felt_on_fruit_id == 1  # felt while the planner worked on fruit 1
     assert core.counters["contacts_felt"] == 2 and core.counters["contacts_kept"] == 1
     beside = (FRUIT[0] - 0.07, FRUIT[1], FRUIT[2])  # felt on it before it was selected
     core.touched.feel(felt(beside), 4600)  # type: ignore[union-attr]
