@@ -94,11 +94,11 @@ class SphereObstacle(Frozen):
     name: str = Field(description="Obstacle name, e.g. 'occupied_3'.")
     center_world_m: Vec3 = Field(description="Centre, world frame, m.")
     radius_m: PosFloat = Field(description="Radius, m.")
-    felt_on_fruit_id: int | None = Field(
-        default=None,
-        description="Felt spheres ('touched_…') only: the fruit the planner was working on every "
-        "time the arms felt this place (its own attempts); none when felt on several, with none "
-        "selected, or not felt.",
+    own_fruit_ids: tuple[int, ...] = Field(
+        default=(),
+        description="Felt spheres ('touched_…') only: the fruit this place is part of, so not in "
+        "their way: it lies on the fruit as the scene estimates it, or was felt only while the "
+        "planner worked on that fruit (its own attempts).",
     )
 
 

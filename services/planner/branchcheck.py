@@ -19,9 +19,10 @@ sessions 15 and 41):
   controller moves it round a branch the dampers show (paper-exp1 seed 11: every IK solution
   of a fruit the controller harvests cleanly put the collector's fifth link into a branch);
   only the bodies carried by each arm's last joint (wrist, cutter, dish) are measured;
-* what the arms felt only while working on this fruit (the scene's ``felt_on_fruit_id``): its
-  own branch, met by a stalled approach, which the dampers then steer round on the retry
-  (orchard seed 7, session 41: three fruit refused for it, 2 of 9 harvested against 7 of 9);
+* what the arms felt that is part of this fruit (the scene's ``own_fruit_ids``): on its skin,
+  or felt only on its own attempts (its own branch, met by a stalled approach, which the
+  dampers steer round on the retry; orchard seed 7, session 41: three fruit refused for such,
+  2 of 9 harvested against 7 of 9);
 * the fruit's own branch end: the cutter closes on the peduncle, a few centimetres from where
   the fruit's twig leaves its branch, so the spheres above the fruit's top within
   ``own_branch_m`` of it are that twig's, not something in the way (paper-exp1 seed 11: the
@@ -138,12 +139,12 @@ class BranchCheck:
         self, fruit: FruitShape, fruit_ids: frozenset[int] = frozenset()
     ) -> tuple[SphereObstacle, ...]:
         """The spheres that may stand in the tools' way for ``fruit`` (whose track IDs are
-        ``fruit_ids``): all but its own twig's and those felt only on its own attempts."""
+        ``fruit_ids``): all but its own twig's and the felt places that are part of it."""
         top = fruit.centre_world_m + np.array([0.0, 0.0, fruit.d_v_m])
         return tuple(
             s
             for s in self.spheres
-            if s.felt_on_fruit_id is None or s.felt_on_fruit_id not in fruit_ids
+            if fruit_ids.isdisjoint(s.own_fruit_ids)
             if not (
                 s.center_world_m[2] >= top[2]
                 and float(np.linalg.norm(np.asarray(s.center_world_m) - top)) <= self.own_branch_m

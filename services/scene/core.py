@@ -373,16 +373,24 @@ class SceneCore:
     def _explained(self) -> tuple[np.ndarray, np.ndarray]:
         """The fruit estimates as spheres (centres, radii; m) that explain fruit-coloured
         points: every entry but the harvested (off the tree; the dish's sphere filters them)."""
+        _ids, centres, radii = self._fruit_spheres()
+        return centres, radii
+
+    def _fruit_spheres(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The fruit on the tree (every entry but the harvested) as IDs and spheres (centres,
+        radii: the largest semi-axis plus occupancy_unseen_fruit_margin_m; m): what lies in
+        one is that fruit (a fruit-coloured point, a place felt)."""
         es = [
             e
             for e in self.fruits.entries.values()
             if self.fruits.marks.get(e.fruit_id) != "harvested"
         ]
+        ids = np.array([e.fruit_id for e in es], dtype=int)
         centres = np.array([e.state.position_world_m for e in es], dtype=float).reshape(-1, 3)
         radii = np.array(
             [max(e.state.semi_axis_h_m, e.state.semi_axis_v_m) for e in es], dtype=float
         )
-        return centres, radii + self.s.occupancy_unseen_fruit_margin_m
+        return ids, centres, radii + self.s.occupancy_unseen_fruit_margin_m
 
     def _measurement(self, fid: int, est: FruitEstimate, T: RigidTransform) -> Measurement:
         flags: list[FruitFlag] = []
@@ -524,9 +532,13 @@ class SceneCore:
         near: tuple[SphereObstacle, ...] = ()
         if self.occupancy is not None or self.touched is not None:
             keep_out = self._keep_out(selected)
-            grids = [g for g in (self.occupancy, self.unseen, self.touched) if g is not None]
+            grids = [g for g in (self.occupancy, self.unseen) if g is not None]
             near = tuple(sp for g in grids for sp in g.within(*keep_out))
             spheres = tuple(sp for g in grids for sp in g.obstacles(*keep_out))
+            if self.touched is not None:
+                on = self._fruit_spheres()
+                near += self.touched.within(*keep_out, fruits=on)
+                spheres += self.touched.obstacles(*keep_out, fruits=on)
             spheres += self._near_shown(selected, near)
             obstacles = obstacles.model_copy(update={"spheres": spheres})
         return SceneState(

@@ -339,13 +339,13 @@ def keep_out_spheres(
     r: float,
     test: KeepOutTest,
     max_n: int,
-    felt_on: Mapping[tuple[int, int, int], int] | None = None,
+    owners: Mapping[tuple[int, int, int], tuple[int, ...]] | None = None,
 ) -> tuple[SphereObstacle, ...]:
     """``voxels`` ((order, key, centre): the lowest order first, then by key) inside or outside
     the keep-out (``test``: (inside wanted, capsules, trunk cylinder); a sphere whose surface
     comes within a capsule is inside, one centred inside the cylinder is left out either way),
-    as spheres ``<name>_<k>`` of radius ``r``, at most ``max_n``; ``felt_on`` gives a voxel's
-    ``felt_on_fruit_id``."""
+    as spheres ``<name>_<k>`` of radius ``r``, at most ``max_n``; ``owners`` gives a voxel's
+    ``own_fruit_ids``."""
     in_keep_out, keep_out, inside_cylinder = test
     radii = np.array([kr for _a, _b, kr in keep_out])
     kept: list[tuple[int, tuple[int, int, int], np.ndarray]] = []
@@ -359,10 +359,10 @@ def keep_out_spheres(
                 continue
         kept.append((order, key, c))
     kept.sort(key=lambda t: (t[0], t[1]))
-    fruit = felt_on or {}
+    own = owners or {}
     return tuple(
         SphereObstacle(
-            name=f"{name}_{i}", center_world_m=vec3(c), radius_m=r, felt_on_fruit_id=fruit.get(k)
+            name=f"{name}_{i}", center_world_m=vec3(c), radius_m=r, own_fruit_ids=own.get(k, ())
         )
         for i, (_o, k, c) in enumerate(kept[:max_n])
     )

@@ -14,12 +14,13 @@ space are not kept. A voxel is forgotten when the fruit it lay on is harvested (
 free) and, like the camera's voxels, it is split by the keep-out round the selected fruit into
 obstacles and near spheres (``obstacles`` / ``within``).
 
-Each voxel remembers the fruit the planner was working on when it was felt. What an attempt
-felt round its own fruit is that fruit's branch, met by a stalled approach that the dampers
-then steer past on the retry: a sphere felt only on one fruit's attempts carries its ID
-(``SphereObstacle.felt_on_fruit_id``) and the planner's branch check does not refuse that
-fruit for it (orchard seed 7, session 41: three fruit were refused for what their own stalled
-attempts had felt, 2 of 9 harvested against 7 of 9 without the felt spheres)."""
+A felt place is part of a fruit, and so not in that fruit's way, when it lies on the fruit as
+the scene estimates it (``fruits``: the arm bumped a neighbour), or when it was felt only while
+the planner worked on that fruit (its own branch, met by a stalled approach, which the dampers
+steer round on the retry). Its sphere carries those fruit (``SphereObstacle.own_fruit_ids``)
+and the planner's branch check does not refuse them for it (orchard seed 7, session 41: fruit
+were refused for what was felt on their own attempt or on their own skin, 2 of 9 harvested
+against 7 of 9 without the felt spheres)."""
 
 from __future__ import annotations
 
@@ -34,6 +35,7 @@ from services.robot.clearance import Capsule, axis_distances_m
 from services.scene.occupancy import keep_out_spheres
 
 PREFIX = "touched_"  # the names of its spheres: the planner tells them from branches
+FruitSpheres = tuple[np.ndarray, np.ndarray, np.ndarray]  # fruit IDs (N,), centres (N, 3), radii
 
 
 @dataclass(frozen=True)
@@ -109,32 +111,45 @@ class TouchedSpace:
         self,
         keep_out: Sequence[Capsule] = (),
         inside_cylinder: tuple[np.ndarray, float] | None = None,
+        fruits: FruitSpheres | None = None,
     ) -> tuple[SphereObstacle, ...]:
-        """The spheres outside the keep-out and the trunk cylinder (OccupancyGrid.obstacles)."""
-        return self._spheres("occupied", False, keep_out, inside_cylinder)
+        """The spheres outside the keep-out and the trunk cylinder (OccupancyGrid.obstacles);
+        ``fruits`` (IDs, centres, radii: m) are the fruit estimates a place may lie on."""
+        return self._spheres("occupied", False, (keep_out, inside_cylinder), fruits)
 
     def within(
         self,
         keep_out: Sequence[Capsule],
         inside_cylinder: tuple[np.ndarray, float] | None = None,
+        fruits: FruitSpheres | None = None,
     ) -> tuple[SphereObstacle, ...]:
         """The spheres the keep-out leaves out of ``obstacles`` (OccupancyGrid.within)."""
-        return self._spheres("near", True, keep_out, inside_cylinder)
+        return self._spheres("near", True, (keep_out, inside_cylinder), fruits)
 
     def _spheres(
         self,
         name: str,
         in_keep_out: bool,
-        keep_out: Sequence[Capsule],
-        inside_cylinder: tuple[np.ndarray, float] | None,
+        regions: tuple[Sequence[Capsule], tuple[np.ndarray, float] | None],
+        fruits: FruitSpheres | None,
     ) -> tuple[SphereObstacle, ...]:
         # the most recently felt first, then by voxel: deterministic
         voxels = [(-v.last_ns, key, v.center_m) for key, v in self.voxels.items()]
-        test = (in_keep_out, keep_out, inside_cylinder)
-        felt_on = {key: v.fruit_id for key, v in self.voxels.items() if v.fruit_id is not None}
+        test = (in_keep_out, *regions)
+        owners = {key: self._owners(v, fruits) for key, v in self.voxels.items()}
         return keep_out_spheres(
-            voxels, f"{PREFIX}{name}", self.p.sphere_radius_m, test, self.p.max_obstacles, felt_on
+            voxels, f"{PREFIX}{name}", self.p.sphere_radius_m, test, self.p.max_obstacles, owners
         )
+
+    @staticmethod
+    def _owners(v: _Felt, fruits: FruitSpheres | None) -> tuple[int, ...]:
+        """The fruit ``v`` is part of: the one it was felt on only, those it lies on."""
+        ids = set() if v.fruit_id is None else {v.fruit_id}
+        if fruits is not None and len(fruits[0]):
+            ids_on, centres_m, radii_m = fruits
+            on = np.linalg.norm(centres_m - v.center_m, axis=1) <= radii_m
+            ids.update(int(i) for i in np.asarray(ids_on)[on])
+        return tuple(sorted(ids))
 
     def _key(self, p: np.ndarray) -> tuple[int, int, int] | None:
         scaled = p / self.p.voxel_m

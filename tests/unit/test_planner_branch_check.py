@@ -110,28 +110,29 @@ def test_an_unseen_fruit_in_the_way_is_named_as_such() -> None:
 
 
 def test_what_was_felt_only_on_the_fruits_own_attempts_does_not_refuse_it() -> None:
-    """The scene's felt spheres carry the fruit whose attempts alone felt them: its own branch,
-    met by a stalled approach, left to the dampers; another fruit's, or anyone's, refuses it."""
+    """The scene's felt spheres carry the fruit they are part of (felt on its attempts alone: its
+    own branch, met by a stalled approach, left to the dampers; or on its skin); another
+    fruit's, or anyone's, refuses it."""
     core = checking()
     assert core.machine.branches is not None
     at = dish_level(core)
 
-    def felt_here(fid: int | None) -> SceneState:
+    def felt_here(own: tuple[int, ...]) -> SceneState:
         return scene(
             tuple(
                 SphereObstacle(
                     name=f"touched_occupied_{k}",
                     center_world_m=tuple(at + np.array([0, y, 0])),
                     radius_m=0.035,
-                    felt_on_fruit_id=fid,
+                    own_fruit_ids=own,
                 )
                 for k, y in enumerate((-0.03, 0.0, 0.03))
             )
         )
 
-    core.machine.branches.set_scene(felt_here(1))
+    core.machine.branches.set_scene(felt_here((1, 3)))
     assert select(core) == 1 and skips(core, 1) == []
-    for other in (3, None):
+    for other in ((3,), ()):
         core = checking()
         assert core.machine.branches is not None
         core.machine.branches.set_scene(felt_here(other))

@@ -38,7 +38,7 @@ def test_points_felt_become_spheres_but_not_in_the_fruits_own_space() -> None:
     assert t.feel(felt((1e12, 0.0, 0.0)), 20) == 0  # too far out to bin: left out
 
 
-def test_a_place_felt_only_on_one_fruits_attempts_carries_its_id() -> None:
+def test_a_place_felt_only_on_one_fruits_attempts_or_on_it_is_part_of_it() -> None:
     t = TouchedSpace(TouchedParams(voxel_m=0.03, sphere_radius_m=0.02))
     own, shared, between = (0.505, 0.105, 1.005), (0.605, 0.105, 1.005), (0.705, 0.105, 1.005)
     t.feel(felt(own, shared), 10, fruit_id=4)
@@ -46,12 +46,18 @@ def test_a_place_felt_only_on_one_fruits_attempts_carries_its_id() -> None:
     t.feel(felt(shared), 30, fruit_id=5)  # felt on another fruit's attempt too: anyone's
     t.feel(felt(between), 40)  # between attempts: anyone's
     by_place = {tuple(round(v, 3) for v in s.center_world_m): s for s in t.obstacles()}
-    assert by_place[own].felt_on_fruit_id == 4
-    assert by_place[shared].felt_on_fruit_id is None
-    assert by_place[between].felt_on_fruit_id is None
+    assert by_place[own].own_fruit_ids == (4,)
+    assert by_place[shared].own_fruit_ids == ()
+    assert by_place[between].own_fruit_ids == ()
     keep_out = [(np.array(own), np.array(own), 0.05)]  # inside the keep-out: still carried
     (near,) = t.within(keep_out)
-    assert near.felt_on_fruit_id == 4
+    assert near.own_fruit_ids == (4,)
+    # a fruit estimated 7 cm from the shared place (radius 8 cm with the margin): on its skin
+    fruits = (np.array([9, 2]), np.array([[0.675, 0.105, 1.005], [0.2, 0.1, 1.0]]), np.full(2, 0.08))
+    by_place = {tuple(round(v, 3) for v in s.center_world_m): s for s in t.obstacles(fruits=fruits)}
+    assert by_place[shared].own_fruit_ids == (9,)
+    assert by_place[own].own_fruit_ids == (4,)  # 17 cm from fruit 9
+    assert by_place[between].own_fruit_ids == (9,)
 
 
 def event(kind: str, fid: int, stamp_ns: int) -> HarvestEvent:
@@ -86,12 +92,23 @@ def test_the_scene_keeps_what_the_arms_felt_and_forgets_it_with_the_fruit() -> N
     assert state.selected_fruit_id == 1
     (s,) = touched(state)  # the target's own underside is touched on purpose: not kept
     assert s.name == "touched_occupied_0" and np.allclose(s.center_world_m, hidden)
-    assert s.felt_on_fruit_id == 1  # felt while the planner worked on fruit 1
+    assert s.own_fruit_ids == (1,)  # felt while the planner worked on fruit 1
     assert core.counters["contacts_felt"] == 2 and core.counters["contacts_kept"] == 1
+    # Given up, fruit 1 is no one's target; what an arm then feels on its skin is part of it.
+    skipped = event("fruit_skipped", 1, 3600).model_copy(update={"outcome": "unreachable"})
+    core.handle("harvest/events", skipped)
+    side = (FRUIT[0], FRUIT[1] + 0.05, FRUIT[2])
+    js = joint_state(3700).model_copy(update={"contacts": tuple(felt(side))})
+    core.handle("robot/joint_state", js)
+    state = scene_state(core, sc, 4)
+    assert state.selected_fruit_id is None
+    by_place = {tuple(round(v, 3) for v in s.center_world_m): s for s in touched(state)}
+    assert by_place[tuple(round(v, 3) for v in side)].own_fruit_ids == (1,)
+    assert by_place[tuple(round(v, 3) for v in hidden)].own_fruit_ids == (1,)
     beside = (FRUIT[0] - 0.07, FRUIT[1], FRUIT[2])  # felt on it before it was selected
     core.touched.feel(felt(beside), 4600)  # type: ignore[union-attr]
     core.handle("harvest/events", event("fruit_collected", 1, 5000))
-    assert core.counters["contacts_forgotten"] == 1  # the one beside the fruit, not the other
+    assert core.counters["contacts_forgotten"] == 2  # those beside the fruit, not the other
     assert len(core.touched.voxels) == 1  # type: ignore[union-attr]
 
 
