@@ -53,7 +53,8 @@ def test_a_place_felt_only_on_one_fruits_attempts_or_on_it_is_part_of_it() -> No
     (near,) = t.within(keep_out)
     assert near.own_fruit_ids == (4,)
     # a fruit estimated 7 cm from the shared place (radius 8 cm with the margin): on its skin
-    fruits = (np.array([9, 2]), np.array([[0.675, 0.105, 1.005], [0.2, 0.1, 1.0]]), np.full(2, 0.08))
+    centres_m = np.array([[0.675, 0.105, 1.005], [0.2, 0.1, 1.0]])
+    fruits = (np.array([9, 2]), centres_m, np.full(2, 0.08))
     by_place = {tuple(round(v, 3) for v in s.center_world_m): s for s in t.obstacles(fruits=fruits)}
     assert by_place[shared].own_fruit_ids == (9,)
     assert by_place[own].own_fruit_ids == (4,)  # 17 cm from fruit 9
