@@ -113,11 +113,11 @@ def test_the_scene_keeps_what_the_arms_felt_and_forgets_it_with_the_fruit() -> N
     assert len(core.touched.voxels) == 1  # type: ignore[union-attr]
 
 
-def test_off_by_default_and_the_sim_fills_the_joint_state() -> None:
+def test_on_by_default_and_the_sim_fills_the_joint_state() -> None:
     from services.sim import SERVICE as SIM
 
-    assert SceneCore(load_settings(Settings, {})).touched is None
-    assert SceneCore(load_settings(Settings, {"contact_obstacles": True})).touched is not None
+    assert SceneCore(load_settings(Settings, {})).touched is not None
+    assert SceneCore(load_settings(Settings, {"contact_obstacles": False})).touched is None
     assert SIM.make_core is not None
     for sensing in (True, False):
         sim = SIM.make_core(
