@@ -327,8 +327,8 @@ class Settings(ServiceSettings):
         "fruit's inner working space) as sphere obstacles 'touched_…' beside the branches', "
         "split by the same keep-out; forgotten where a fruit is harvested; a place on a fruit's "
         "estimated skin or felt only on its own attempts is part of it (own_fruit_ids, "
-        "touched.py). On the orchard's 20 seeds: 85 of 101 reachable fruit against 77, 131 "
-        "collisions against 231.",
+        "touched.py). On the orchard's 20 seeds: 85 of 101 reachable fruit against 82, 131 "
+        "collisions against 173 (session 42, both ways on one VM).",
     )
     contact_voxel_m: float = Field(
         default=0.03, gt=0.005, le=0.2, description="… felt points are binned at this size, m."
