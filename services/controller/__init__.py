@@ -90,6 +90,21 @@ class Settings(ServiceSettings):
     soft_damper_weight: float = Field(
         default=1e4, gt=0, description="Fallback: weight of the dampers' slack when softened."
     )
+    max_joint_acceleration_rad_s2: float | None = Field(
+        default=None,
+        gt=0,
+        description="Each joint's command may change by at most this times the control period "
+        "from the last command sent (a hold counts as zero), rad/s²; None: no bound. A soft "
+        "bound (acceleration_weight) under the hard limits and dampers: a damper that must stop "
+        "a link at once still can. Without it the QP's step can flip a wrist joint from +v_max "
+        "to -v_max from one tick to the next, which no arm follows.",
+    )
+    acceleration_weight: float = Field(
+        default=1e3,
+        gt=0,
+        description="Weight of the acceleration bound's slack (rad⁻²): far above the task "
+        "weights (per-step errors of mm), below soft_damper_weight.",
+    )
     # --- collision avoidance (paper eq. (7)–(8)) -------------------------------------------
     trunk: DamperGroup = Field(
         default=DamperGroup(activation_m=0.15, safety_m=0.03, speed_m_s=0.3),

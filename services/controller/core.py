@@ -92,6 +92,7 @@ class ControllerCore:
                 s.regularization_abs,
                 s.regularization_rel,
                 s.soft_damper_weight,
+                s.acceleration_weight,
             ),
             s.nominal_period_s,
         )
@@ -126,6 +127,9 @@ class ControllerCore:
         self.scene_refused: str | None = None
         self._obstacles: ObstacleArrays = EMPTY
         self._obstacles_key: tuple[Any, ...] | None = None
+        # The last command sent (arm order, rad/s; a hold is zero): the acceleration bound's
+        # reference.
+        self.last_qd_rad_s = np.zeros(len(self.robot.names))
 
     # ---- inputs ----------------------------------------------------------------------------
     def handle(self, topic: str, msg: Any) -> list[Output]:
@@ -145,6 +149,7 @@ class ControllerCore:
         if reason is None or self.watchdog.last_js_stamp_ns is None:
             return []
         self.counters.watchdog_stops += 1
+        self.last_qd_rad_s = np.zeros(len(self.robot.names))
         stamp = self.watchdog.last_js_stamp_ns  # no newer time is known; never goes back
         tick = Tick(reason=reason, watchdog=True)
         return self._messages(tick, stamp, None, None)
@@ -220,6 +225,7 @@ class ControllerCore:
                 tick = self._control(js, q, period.dt_s, period.stale)
             except Exception as exc:  # never leave a tick unanswered: that stalls lock-step
                 tick = Tick(reason=f"internal error, holding: {type(exc).__name__}: {exc}")
+        self.last_qd_rad_s = np.zeros(len(self.robot.names)) if tick.qd is None else tick.qd
         if tick.watchdog:
             self.counters.watchdog_stops += 1
         if tick.fallback != "none":
@@ -251,6 +257,7 @@ class ControllerCore:
         tick.t_damper_s = time.perf_counter() - t
         t = time.perf_counter()
         assert self.goals is not None
+        self._bound_acceleration(dt_s)
         if self.goals.joints_rad is None:
             res = self.hqp.solve(tick.abs_step, tick.rel_step, rows, dt_s)
         else:
@@ -299,6 +306,21 @@ class ControllerCore:
             dt_s,
         )
         return abs_step, rel_step
+
+    def _bound_acceleration(self, dt_s: float) -> None:
+        """This tick's steps within max_joint_acceleration_rad_s2 of the last command, and no
+        faster towards a position limit than that deceleration can stop before it (else the
+        hard limit stops the joint in one tick)."""
+        a = self.s.max_joint_acceleration_rad_s2
+        if a is None:
+            return
+        r, dv, last = self.robot, a * dt_s, self.last_qd_rad_s
+        q = r.q_full[r.q_idx]
+        v_up = _braking_speed(r.upper_rad - q, a, dt_s)
+        v_down = -_braking_speed(q - r.lower_rad, a, dt_s)
+        high = np.maximum(np.minimum(last + dv, v_up), last - dv)
+        low = np.minimum(np.maximum(last - dv, v_down), last + dv)
+        self.hqp.bound_steps(low * dt_s, high * dt_s)
 
     def _joint_step(self, q: np.ndarray, goal_rad: np.ndarray, dt_s: float) -> dict[str, float]:
         """Per-step joint targets: q + K dt (goal − q), each joint capped at a fraction of its
@@ -395,3 +417,10 @@ class ControllerCore:
             fallbacks=c.fallbacks,
             watchdog_stops=c.watchdog_stops,
         )
+
+
+def _braking_speed(room_rad: np.ndarray, a_rad_s2: float, dt_s: float) -> np.ndarray:
+    """The fastest speed, rad/s, from which one more tick at it and then braking at
+    ``a_rad_s2`` stops within ``room_rad``: v dt + v²/(2a) = room."""
+    room = np.maximum(room_rad, 0.0)
+    return a_rad_s2 * (np.sqrt(dt_s**2 + 2 * room / a_rad_s2) - dt_s)

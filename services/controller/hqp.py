@@ -38,6 +38,7 @@ class Weights:
     regularization_abs: float = 1e-6
     regularization_rel: float = 1e-4
     soft_damper: float = 1e4
+    acceleration: float = 1e3
 
 
 @dataclass(frozen=True)
@@ -66,6 +67,7 @@ class LexicographicHQP:
         self.abs_ori.configure("abs_orientation", "soft", weights.abs_orientation)
         self.s1.add_regularization_task(weights.regularization_abs)
         self.damp1 = self.s1.add_joint_space_half_spaces_constraint(np.zeros((1, nq)), np.ones(1))
+        self.acc1 = self._acceleration_bound(self.s1, "acceleration1")
 
         self.s2 = self._solver(placo, dt_s)
         self.rel_pos = self.s2.add_relative_position_task(cut, col, np.zeros(3))
@@ -74,6 +76,7 @@ class LexicographicHQP:
         self.rel_ori.configure("rel_orientation", "soft", weights.rel_orientation)
         self.s2.add_regularization_task(weights.regularization_rel)
         self.damp2 = self.s2.add_joint_space_half_spaces_constraint(np.zeros((1, nq)), np.ones(1))
+        self.acc2 = self._acceleration_bound(self.s2, "acceleration2")
         self.hold = self.s2.add_joint_space_half_spaces_constraint(np.zeros((1, nq)), np.ones(1))
         self.hold.configure("hold_absolute", "hard", 1.0)
 
@@ -84,6 +87,7 @@ class LexicographicHQP:
         self.joints.configure("joints", "soft", 1.0)
         self.s0.add_regularization_task(weights.regularization_abs)
         self.damp0 = self.s0.add_joint_space_half_spaces_constraint(np.zeros((1, nq)), np.ones(1))
+        self.acc0 = self._acceleration_bound(self.s0, "acceleration0")
 
     def _solver(self, placo: Any, dt_s: float) -> Any:
         """A solver with the torso fixed and the URDF's position and velocity limits."""
@@ -93,6 +97,32 @@ class LexicographicHQP:
         s.enable_joint_limits(True)  # lower ≤ q + Δq ≤ upper
         s.enable_velocity_limits(True)
         return s
+
+    def _acceleration_bound(self, solver: Any, name: str) -> Any:
+        """Two soft half-spaces per arm joint (inactive until ``bound_steps`` sets them)."""
+        n = len(self.robot.names)
+        c = solver.add_joint_space_half_spaces_constraint(
+            np.zeros((2 * n, self.robot.model.nq)), np.ones(2 * n)
+        )
+        c.configure(name, "soft", self.w.acceleration)
+        return c
+
+    def bound_steps(self, low_rad: np.ndarray | None, high_rad: np.ndarray | None) -> None:
+        """Keep each arm joint's step (arm order, rad) within [low, high] as a soft bound, in
+        every solve from now on; None: unbounded. Soft, so never infeasible: the hard limits
+        and the dampers come first."""
+        n = len(self.robot.names)
+        nq = self.robot.model.nq
+        A = np.zeros((2 * n, nq))
+        b = np.ones(2 * n)
+        if low_rad is not None and high_rad is not None:
+            q = self.robot.q_full[self.robot.q_idx]
+            rows = np.arange(n)
+            A[rows, self.robot.q_idx] = 1.0  # q + Δq ≤ q + high
+            A[n + rows, self.robot.q_idx] = -1.0  # -(q + Δq) ≤ -(q + low)
+            b = np.concatenate([q + high_rad, -(q + low_rad)])
+        for c in (self.acc0, self.acc1, self.acc2):
+            c.A, c.b = A, b
 
     def solve(
         self, abs_step: StepTarget, rel_step: StepTarget, rows: DamperRows, dt_s: float
