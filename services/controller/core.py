@@ -95,6 +95,7 @@ class ControllerCore:
                 s.acceleration_weight,
             ),
             s.nominal_period_s,
+            bound_steps=s.max_joint_acceleration_rad_s2 is not None,
         )
         self.watchdog = Watchdog(
             s.joint_state_timeout_ms * 1e-3, s.target_timeout_ms * 1e-3, s.nominal_period_s

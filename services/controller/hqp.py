@@ -53,11 +53,17 @@ class HqpResult:
 class LexicographicHQP:
     """Two placo KinematicsSolvers on one robot, sharing the damper rows."""
 
-    def __init__(self, robot: ControlledRobot, weights: Weights, dt_s: float) -> None:
+    def __init__(
+        self, robot: ControlledRobot, weights: Weights, dt_s: float, bound_steps: bool = False
+    ) -> None:
+        """``bound_steps``: give each solve the soft step bound ``bound_steps()`` sets; off,
+        the solves have no such rows at all (inactive soft rows would still add slack
+        variables and change the steps by round-off)."""
         import placo
 
         self.robot = robot
         self.w = weights
+        self.bounded = bound_steps
         cut, col = robot.tool_frame["cutter"], robot.tool_frame["collector"]
         nq = robot.model.nq
         self.s1 = self._solver(placo, dt_s)
@@ -67,7 +73,7 @@ class LexicographicHQP:
         self.abs_ori.configure("abs_orientation", "soft", weights.abs_orientation)
         self.s1.add_regularization_task(weights.regularization_abs)
         self.damp1 = self.s1.add_joint_space_half_spaces_constraint(np.zeros((1, nq)), np.ones(1))
-        self.acc1 = self._acceleration_bound(self.s1, "acceleration1")
+        self.acc1 = self._step_bound(self.s1, "acceleration1")
 
         self.s2 = self._solver(placo, dt_s)
         self.rel_pos = self.s2.add_relative_position_task(cut, col, np.zeros(3))
@@ -76,7 +82,7 @@ class LexicographicHQP:
         self.rel_ori.configure("rel_orientation", "soft", weights.rel_orientation)
         self.s2.add_regularization_task(weights.regularization_rel)
         self.damp2 = self.s2.add_joint_space_half_spaces_constraint(np.zeros((1, nq)), np.ones(1))
-        self.acc2 = self._acceleration_bound(self.s2, "acceleration2")
+        self.acc2 = self._step_bound(self.s2, "acceleration2")
         self.hold = self.s2.add_joint_space_half_spaces_constraint(np.zeros((1, nq)), np.ones(1))
         self.hold.configure("hold_absolute", "hard", 1.0)
 
@@ -87,7 +93,7 @@ class LexicographicHQP:
         self.joints.configure("joints", "soft", 1.0)
         self.s0.add_regularization_task(weights.regularization_abs)
         self.damp0 = self.s0.add_joint_space_half_spaces_constraint(np.zeros((1, nq)), np.ones(1))
-        self.acc0 = self._acceleration_bound(self.s0, "acceleration0")
+        self.acc0 = self._step_bound(self.s0, "acceleration0")
 
     def _solver(self, placo: Any, dt_s: float) -> Any:
         """A solver with the torso fixed and the URDF's position and velocity limits."""
@@ -98,8 +104,11 @@ class LexicographicHQP:
         s.enable_velocity_limits(True)
         return s
 
-    def _acceleration_bound(self, solver: Any, name: str) -> Any:
-        """Two soft half-spaces per arm joint (inactive until ``bound_steps`` sets them)."""
+    def _step_bound(self, solver: Any, name: str) -> Any:
+        """Two soft half-spaces per arm joint (inactive until ``bound_steps`` sets them);
+        None when the steps are not bounded."""
+        if not self.bounded:
+            return None
         n = len(self.robot.names)
         c = solver.add_joint_space_half_spaces_constraint(
             np.zeros((2 * n, self.robot.model.nq)), np.ones(2 * n)
@@ -110,7 +119,9 @@ class LexicographicHQP:
     def bound_steps(self, low_rad: np.ndarray | None, high_rad: np.ndarray | None) -> None:
         """Keep each arm joint's step (arm order, rad) within [low, high] as a soft bound, in
         every solve from now on; None: unbounded. Soft, so never infeasible: the hard limits
-        and the dampers come first."""
+        and the dampers come first. Only for a solver built with ``bound_steps``."""
+        if not self.bounded:
+            raise ValueError("bound_steps() on an HQP built without bound_steps=True")
         n = len(self.robot.names)
         nq = self.robot.model.nq
         A = np.zeros((2 * n, nq))
