@@ -111,3 +111,12 @@ def test_a_hold_counts_as_zero_so_the_arms_start_again_gently() -> None:
 def test_a_bound_that_is_not_positive_stops_start_up_with_the_field_named() -> None:
     with pytest.raises(SettingsError, match="max_joint_acceleration_rad_s2"):
         load_settings(Settings, {"max_joint_acceleration_rad_s2": 0})
+
+
+def test_off_the_solves_carry_no_step_rows_at_all() -> None:
+    """Inactive soft rows would still add slack variables and move the steps by round-off
+    (5.6e-12 rad/s measured), which a closed loop turns into another run."""
+    core = ControllerCore(UNBOUNDED)
+    assert (core.hqp.acc0, core.hqp.acc1, core.hqp.acc2) == (None, None, None)
+    with pytest.raises(ValueError, match="bound_steps"):
+        core.hqp.bound_steps(np.zeros(14), np.zeros(14))
