@@ -97,7 +97,9 @@ class Settings(ServiceSettings):
         "from the last command sent (a hold counts as zero), rad/s²; None: no bound. A soft "
         "bound (acceleration_weight) under the hard limits and dampers: a damper that must stop "
         "a link at once still can. Without it the QP's step can flip a wrist joint from +v_max "
-        "to -v_max from one tick to the next, which no arm follows.",
+        "to -v_max from one tick to the next, which no arm follows. Off by default: on the "
+        "orchard, 15 rad/s² had fewer collisions but harvested fewer fruit (BENCHMARKS.md, "
+        "Harvest, session 43).",
     )
     acceleration_weight: float = Field(
         default=1e3,
