@@ -84,13 +84,19 @@ ADVERSARIAL = {
 }
 
 
+@pytest.mark.parametrize("bound", [None, 15.0], ids=["unbounded", "acceleration bound"])
 @pytest.mark.parametrize("case", sorted(ADVERSARIAL))
-def test_dampers_keep_every_distance_at_least_d_s(case: str) -> None:
+def test_dampers_keep_every_distance_at_least_d_s(case: str, bound: float | None) -> None:
+    """Also with the joint acceleration bound: it is soft, under the dampers."""
     target, sc = ADVERSARIAL[case]
     monitor = SafetyMonitor(sc.obstacles, target.ignore_fruit_ids)
     start = monitor.distances(KinematicSim().q_arm_order())
     assert all(start[k] > SAFETY[k] for k in start), "the scene must start clear"
-    core = ControllerCore(SETTINGS)
+    core = ControllerCore(
+        SETTINGS.model_copy(update={"max_joint_acceleration_rad_s2": bound})
+        if bound is not None
+        else SETTINGS
+    )
     res = run_loop(
         core,
         KinematicSim(),
