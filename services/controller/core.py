@@ -258,7 +258,7 @@ class ControllerCore:
         tick.t_damper_s = time.perf_counter() - t
         t = time.perf_counter()
         assert self.goals is not None
-        self._bound_acceleration(dt_s)
+        self._bound_acceleration(q, dt_s)
         if self.goals.joints_rad is None:
             res = self.hqp.solve(tick.abs_step, tick.rel_step, rows, dt_s)
         else:
@@ -308,7 +308,7 @@ class ControllerCore:
         )
         return abs_step, rel_step
 
-    def _bound_acceleration(self, dt_s: float) -> None:
+    def _bound_acceleration(self, q: np.ndarray, dt_s: float) -> None:
         """This tick's steps within max_joint_acceleration_rad_s2 of the last command, and no
         faster towards a position limit than that deceleration can stop before it (else the
         hard limit stops the joint in one tick)."""
@@ -316,12 +316,11 @@ class ControllerCore:
         if a is None:
             return
         r, dv, last = self.robot, a * dt_s, self.last_qd_rad_s
-        q = r.q_full[r.q_idx]
         v_up = _braking_speed(r.upper_rad - q, a, dt_s)
         v_down = -_braking_speed(q - r.lower_rad, a, dt_s)
         high = np.maximum(np.minimum(last + dv, v_up), last - dv)
         low = np.minimum(np.maximum(last - dv, v_down), last + dv)
-        self.hqp.bound_steps(low * dt_s, high * dt_s)
+        self.hqp.bound_steps(q, low * dt_s, high * dt_s)
 
     def _joint_step(self, q: np.ndarray, goal_rad: np.ndarray, dt_s: float) -> dict[str, float]:
         """Per-step joint targets: q + K dt (goal − q), each joint capped at a fraction of its

@@ -105,35 +105,28 @@ class LexicographicHQP:
         return s
 
     def _step_bound(self, solver: Any, name: str) -> Any:
-        """Two soft half-spaces per arm joint (inactive until ``bound_steps`` sets them);
-        None when the steps are not bounded."""
+        """Two soft half-spaces per arm joint, ``q + Δq ≤ q + high`` and ``-(q + Δq) ≤
+        -(q + low)``: the rows are fixed, ``bound_steps`` sets their right-hand side (inactive
+        until then: 1000 rad). None when the steps are not bounded."""
         if not self.bounded:
             return None
         n = len(self.robot.names)
-        c = solver.add_joint_space_half_spaces_constraint(
-            np.zeros((2 * n, self.robot.model.nq)), np.ones(2 * n)
-        )
+        A = np.zeros((2 * n, self.robot.model.nq))
+        A[np.arange(n), self.robot.q_idx] = 1.0
+        A[n + np.arange(n), self.robot.q_idx] = -1.0
+        c = solver.add_joint_space_half_spaces_constraint(A, np.full(2 * n, 1e3))
         c.configure(name, "soft", self.w.acceleration)
         return c
 
-    def bound_steps(self, low_rad: np.ndarray | None, high_rad: np.ndarray | None) -> None:
-        """Keep each arm joint's step (arm order, rad) within [low, high] as a soft bound, in
-        every solve from now on; None: unbounded. Soft, so never infeasible: the hard limits
-        and the dampers come first. Only for a solver built with ``bound_steps``."""
+    def bound_steps(self, q_rad: np.ndarray, low_rad: np.ndarray, high_rad: np.ndarray) -> None:
+        """Keep each arm joint's step from ``q_rad`` (arm order, rad) within [low, high] as a
+        soft bound, in every solve from now on. Soft, so never infeasible: the hard limits and
+        the dampers come first. Only for a solver built with ``bound_steps``."""
         if not self.bounded:
             raise ValueError("bound_steps() on an HQP built without bound_steps=True")
-        n = len(self.robot.names)
-        nq = self.robot.model.nq
-        A = np.zeros((2 * n, nq))
-        b = np.ones(2 * n)
-        if low_rad is not None and high_rad is not None:
-            q = self.robot.q_full[self.robot.q_idx]
-            rows = np.arange(n)
-            A[rows, self.robot.q_idx] = 1.0  # q + Δq ≤ q + high
-            A[n + rows, self.robot.q_idx] = -1.0  # -(q + Δq) ≤ -(q + low)
-            b = np.concatenate([q + high_rad, -(q + low_rad)])
+        b = np.concatenate([q_rad + high_rad, -(q_rad + low_rad)])
         for c in (self.acc0, self.acc1, self.acc2):
-            c.A, c.b = A, b
+            c.b = b
 
     def solve(
         self, abs_step: StepTarget, rel_step: StepTarget, rows: DamperRows, dt_s: float

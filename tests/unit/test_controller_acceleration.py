@@ -95,4 +95,4 @@ def test_off_the_solves_carry_no_step_rows_at_all() -> None:
     core = ControllerCore(UNBOUNDED)
     assert (core.hqp.acc0, core.hqp.acc1, core.hqp.acc2) == (None, None, None)
     with pytest.raises(ValueError, match="bound_steps"):
-        core.hqp.bound_steps(np.zeros(14), np.zeros(14))
+        core.hqp.bound_steps(np.zeros(14), np.zeros(14), np.zeros(14))
