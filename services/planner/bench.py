@@ -456,13 +456,16 @@ def _contacts(got: Collected, centres: dict[int, np.ndarray]) -> dict[str, Any]:
     are the collisions. Those are split again by what was touched and by the planner's phase
     when the contact began, and counted as *episodes* too: a (link, body) pair that touches
     again within ``EPISODE_GAP_NS`` of its last contact ending (a link grazing a branch
-    flickers) is one episode. Diagnostics: ``collisions`` stays the figure."""
+    flickers) is one episode, and as *first touches*: a body no link had touched before in the
+    run (what the felt spheres cannot have prevented). Diagnostics: ``collisions`` stays the
+    figure."""
     windows = _target_windows(got, centres)
     phases = _phases(got.harvest_events)
     by_kind: Counter[str] = Counter()
     by_phase: Counter[str] = Counter()
     last_end: dict[tuple[str, str], int] = {}
-    target = episodes = 0
+    touched: set[str] = set()
+    target = episodes = first = 0
     for e in got.sim_events:
         if e.kind != "collision":
             continue
@@ -471,16 +474,20 @@ def _contacts(got: Collected, centres: dict[int, np.ndarray]) -> dict[str, Any]:
             last_end[pair] = t
             continue
         fruit = [w[2] for w in windows if w[0] <= t <= w[1]]
+        new_body = e.body_b not in touched
+        touched.add(e.body_b)
         if fruit and e.body_b == f"fruit_{fruit[0]}":
             target += 1
             continue
         by_kind[body_kind(e.body_b)] += 1
         by_phase[_phase_at(phases, t)] += 1
         episodes += pair not in last_end or t - last_end[pair] > EPISODE_GAP_NS
+        first += new_body
     return {
         "collisions": sum(by_kind.values()),
         "target_contacts": target,
         "collision_episodes": episodes,
+        "collisions_first_touch": first,
         "collisions_by_kind": dict(sorted(by_kind.items())),
         "collisions_by_phase": dict(sorted(by_phase.items())),
     }
@@ -900,6 +907,7 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "dropped",
             "collisions",
             "collision_episodes",
+            "collisions_first_touch",
             "target_contacts",
             "commands_clamped",
             "retraces",
@@ -964,6 +972,7 @@ def table(result: dict[str, Any]) -> str:
         ("dropped", "dropped"),
         ("collisions", "collisions (robot contacts, target excluded)"),
         ("collision_episodes", "  as episodes (a pair again within 0.5 s: one)"),
+        ("collisions_first_touch", "  of which a body's first touch in the run"),
         ("target_contacts", "contacts with the fruit being harvested"),
         ("median_s_per_fruit", "median s per harvested fruit"),
         ("s_per_fruit_total", "run s per harvested fruit"),

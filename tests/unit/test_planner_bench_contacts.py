@@ -55,6 +55,8 @@ def collected() -> bench.Collected:
 def test_collisions_are_split_by_what_and_when() -> None:
     c = bench._contacts(collected(), CENTRES)
     assert (c["collisions"], c["target_contacts"], c["collision_episodes"]) == (5, 1, 4)
+    # branch_2 at 0.7 s and at 6 s had been touched before: 3 of the 5 are first touches
+    assert c["collisions_first_touch"] == 3
     assert c["collisions_by_kind"] == {"branch": 3, "fruit": 1, "trunk": 1}
     assert c["collisions_by_phase"] == {"approach": 2, "harvest": 1, "leave": 2}
 
@@ -65,8 +67,10 @@ def test_the_splits_add_up_over_seeds() -> None:
     row.update(bench._contacts(collected(), CENTRES))
     tot = bench.aggregate([row, dict(row)])
     assert tot["collisions"] == 10 and tot["collision_episodes"] == 8
+    assert tot["collisions_first_touch"] == 6
     assert tot["collisions_by_kind"] == {"branch": 6, "fruit": 2, "trunk": 2}
     text = bench.table({"scenario": "x", "seeds": [0, 1], "mode": "inproc", "policies": {"n": tot}})
+    assert "of which a body's first touch in the run" in text
     assert "collisions by what:" in text and "collisions by phase:" in text
 
 
