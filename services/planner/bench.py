@@ -919,6 +919,8 @@ def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
             *CUT_KEYS,
         )
     }
+    if any("collisions_first_touch" not in r for r in rows):
+        tot["collisions_first_touch"] = None  # rows from before it was counted: not 0
     cycles = [c for r in rows for c in r["cycles_s"]]
     sim_s, wall_s = sum(r["sim_s"] for r in rows), sum(r["wall_s"] for r in rows)
     return {

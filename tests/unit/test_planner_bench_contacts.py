@@ -68,6 +68,8 @@ def test_the_splits_add_up_over_seeds() -> None:
     tot = bench.aggregate([row, dict(row)])
     assert tot["collisions"] == 10 and tot["collision_episodes"] == 8
     assert tot["collisions_first_touch"] == 6
+    old = {k: v for k, v in row.items() if k != "collisions_first_touch"}
+    assert bench.aggregate([row, old])["collisions_first_touch"] is None  # unknown, not 0
     assert tot["collisions_by_kind"] == {"branch": 6, "fruit": 2, "trunk": 2}
     text = bench.table({"scenario": "x", "seeds": [0, 1], "mode": "inproc", "policies": {"n": tot}})
     assert "of which a body's first touch in the run" in text
