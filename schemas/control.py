@@ -122,7 +122,12 @@ class ControllerDiagnostics(Message):
     solve_ms: NonNegFloat = Field(description="Both QP solves (absolute, relative), ms.")
     pairs_checked: int = Field(ge=0, description="Geometry pairs whose distance was computed.")
     obstacles_near: int = Field(ge=0, description="Obstacles that passed the broad phase.")
-    obstacles_total: int = Field(ge=0, description="Obstacles in the scene state in use.")
+    obstacles_total: int = Field(
+        ge=0, description="Obstacles in use: the scene state's, and the contact reflex's."
+    )
+    reflex_spheres: int = Field(
+        default=0, ge=0, description="Felt places the contact reflex holds as spheres now."
+    )
     rejected_targets: int = Field(ge=0, description="Plan targets refused so far.")
     rejected_scenes: int = Field(ge=0, description="Scene states refused so far.")
     rejected_joint_states: int = Field(ge=0, description="Joint states refused so far.")

@@ -128,6 +128,36 @@ class Settings(ServiceSettings):
         "nearest ones (a branch is many adjacent spheres; the nearest guard the rest, and the "
         "cycle's cost stays bounded).",
     )
+    contact_reflex: bool = Field(
+        default=False,
+        description="Hold each place the arms feel (the joint state's contacts), outside the "
+        "inner working space of the fruit worked on, as a damper sphere from the tick that "
+        "reports it (reflex.py): the link backs off at once instead of when the scene's next "
+        "state carries the place (up to 8 ticks later). Off: the obstacle set is the scene's.",
+    )
+    contact_reflex_radius_m: float = Field(
+        default=0.01, ge=0.002, le=0.1, description="… a felt place's sphere radius, m."
+    )
+    contact_reflex_voxel_m: float = Field(
+        default=0.02, gt=0.002, le=0.2, description="… felt points are binned at this size, m."
+    )
+    contact_reflex_hold_ms: float = Field(
+        default=500.0, gt=0, description="… a sphere is held this long after last felt, ms."
+    )
+    contact_reflex_inner_clearance_m: float = Field(
+        default=0.05,
+        ge=0,
+        le=1,
+        description="… no sphere within d_v plus this of the worked fruit's centre, nor of its "
+        "twig up to d_v plus contact_reflex_inner_twig_m above it (the scene's "
+        "occupancy_inner_clearance_m), m.",
+    )
+    contact_reflex_inner_twig_m: float = Field(
+        default=0.10, ge=0, le=0.5, description="See contact_reflex_inner_clearance_m, m."
+    )
+    contact_reflex_max_spheres: int = Field(
+        default=32, ge=1, le=256, description="… at most this many spheres (the latest felt)."
+    )
     self_collision: DamperGroup = Field(
         default=DamperGroup(activation_m=0.08, safety_m=0.01, speed_m_s=0.3),
         description="Dampers for the self-collision pairs of collisions.json.",

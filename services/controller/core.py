@@ -34,7 +34,9 @@ from services.controller.obstacles import (
     ObstacleError,
     check_obstacles,
     obstacle_arrays,
+    with_spheres,
 )
+from services.controller.reflex import ContactReflex, ReflexParams, inner_space
 from services.controller.robot import ControlledRobot
 from services.controller.targets import Gains, PoseGoal, StepTarget, step_target
 from services.controller.watchdog import Watchdog
@@ -128,6 +130,20 @@ class ControllerCore:
         self.scene_refused: str | None = None
         self._obstacles: ObstacleArrays = EMPTY
         self._obstacles_key: tuple[Any, ...] | None = None
+        self.reflex = (
+            ContactReflex(
+                ReflexParams(
+                    s.contact_reflex_radius_m,
+                    s.contact_reflex_voxel_m,
+                    round(s.contact_reflex_hold_ms * 1e6),
+                    s.contact_reflex_inner_clearance_m,
+                    s.contact_reflex_inner_twig_m,
+                    s.contact_reflex_max_spheres,
+                )
+            )
+            if s.contact_reflex
+            else None
+        )
         # The last command sent (arm order, rad/s; a hold is zero): the acceleration bound's
         # reference.
         self.last_qd_rad_s = np.zeros(len(self.robot.names))
@@ -204,14 +220,32 @@ class ControllerCore:
         self.scene, self.scene_refused = msg, None
 
     def _obstacle_set(self) -> ObstacleArrays:
-        if self.scene is None:
+        reflex = self.reflex.version if self.reflex is not None else None
+        if not self._obstacles_in_use():
             return EMPTY
         ignore = self.target.ignore_fruit_ids if self.target is not None else ()
-        key = (self.scene.header.seq, self.scene.header.stamp_ns, ignore)
+        h = self.scene.header if self.scene is not None else None
+        key = (h.seq if h else None, h.stamp_ns if h else None, ignore, reflex)
         if key != self._obstacles_key:
-            self._obstacles = obstacle_arrays(self.scene.obstacles, ignore)
+            base = obstacle_arrays(self.scene.obstacles, ignore) if self.scene else EMPTY
+            if self.reflex is not None:
+                base = with_spheres(base, *self.reflex.spheres())
+            self._obstacles = base
             self._obstacles_key = key
         return self._obstacles
+
+    def _obstacles_in_use(self) -> bool:
+        return self.scene is not None or (self.reflex is not None and bool(self.reflex.voxels))
+
+    def _feel(self, js: JointState) -> None:
+        """The contact reflex: this tick's felt places, but those on the fruit worked on (the
+        target's ignored fruit and the scene's selected one)."""
+        assert self.reflex is not None
+        worked = set(self.target.ignore_fruit_ids) if self.target is not None else set()
+        if self.scene is not None and self.scene.selected_fruit_id is not None:
+            worked.add(self.scene.selected_fruit_id)
+        inner = inner_space(self.scene, worked, self.reflex.p) if js.contacts else []
+        self.reflex.feel(js.contacts, js.header.stamp_ns, inner)
 
     # ---- the tick --------------------------------------------------------------------------
     def _on_joint_state(self, js: JointState) -> list[Output]:
@@ -223,6 +257,8 @@ class ControllerCore:
             tick = Tick(reason=f"joint state seq {js.header.seq} refused: {q.reason}")
         else:
             try:
+                if self.reflex is not None:
+                    self._feel(js)
                 tick = self._control(js, q, period.dt_s, period.stale)
             except Exception as exc:  # never leave a tick unanswered: that stalls lock-step
                 tick = Tick(reason=f"internal error, holding: {type(exc).__name__}: {exc}")
@@ -410,7 +446,8 @@ class ControllerCore:
             solve_ms=tick.t_solve_s * 1e3,
             pairs_checked=tick.dist.pairs_checked,
             obstacles_near=tick.dist.obstacles_near,
-            obstacles_total=self._obstacles.count if self.scene is not None else 0,
+            obstacles_total=self._obstacles.count if self._obstacles_in_use() else 0,
+            reflex_spheres=len(self.reflex.voxels) if self.reflex is not None else 0,
             rejected_targets=c.rejected_targets,
             rejected_scenes=c.rejected_scenes,
             rejected_joint_states=c.rejected_joint_states,

@@ -95,3 +95,21 @@ def obstacle_arrays(obstacles: Obstacles, ignore_fruit_ids: tuple[int, ...] = ()
         np.array([sp.center_world_m for sp in obstacles.spheres], dtype=float).reshape(-1, 3),
         np.array([sp.radius_m for sp in obstacles.spheres], dtype=float),
     )
+
+
+def with_spheres(
+    arrays: ObstacleArrays, centres_m: np.ndarray, radii_m: np.ndarray
+) -> ObstacleArrays:
+    """``arrays`` with the spheres ``centres_m`` (K, 3) and ``radii_m`` (K,) after its own (a
+    new set: a new serial)."""
+    if not len(radii_m):
+        return arrays
+    return ObstacleArrays(
+        arrays.ellipsoid_centers_m,
+        arrays.ellipsoid_semi_axes_m,
+        arrays.ellipsoid_fruit_ids,
+        arrays.cylinder_points_m,
+        arrays.cylinder_radii_m,
+        np.vstack([arrays.sphere_centers_m, centres_m]),
+        np.concatenate([arrays.sphere_radii_m, radii_m]),
+    )
