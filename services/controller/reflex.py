@@ -25,7 +25,7 @@ import numpy as np
 
 from schemas.robot import SensedContact
 from schemas.scene import SceneState
-from services.robot.clearance import Capsule, axis_distances_m
+from services.robot.clearance import Capsule, axis_distances_m, voxel_key
 
 
 @dataclass(frozen=True)
@@ -66,7 +66,7 @@ class ContactReflex:
             if inner and bool(np.any(axis_distances_m(p, inner) < radii)):
                 self.skipped_inner += 1
                 continue
-            key = self._key(p)
+            key = voxel_key(p, self.p.voxel_m)
             if key is None:
                 continue
             v = self.voxels.get(key)
@@ -94,13 +94,6 @@ class ContactReflex:
             del self.voxels[k]
         if old:
             self.version += 1
-
-    def _key(self, p: np.ndarray) -> tuple[int, int, int] | None:
-        scaled = p / self.p.voxel_m
-        if not np.all(np.isfinite(scaled)) or np.any(np.abs(scaled) > 1e9):
-            return None
-        i, j, k = (int(v) for v in np.floor(scaled))
-        return i, j, k
 
 
 def inner_space(

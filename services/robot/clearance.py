@@ -72,3 +72,13 @@ def distance_to_home_robot_m(p_world_m: np.ndarray) -> float:
     caps = home_capsules()
     radii = np.array([r for _a, _b, r in caps])
     return float((axis_distances_m(p_world_m, caps) - radii).min())
+
+
+def voxel_key(p_world_m: np.ndarray, voxel_m: float) -> tuple[int, int, int] | None:
+    """The world-frame voxel of edge ``voxel_m`` that holds a point (a felt contact: the scene's
+    felt places, the controller's reflex); None for a point not finite or too far out to bin."""
+    scaled = np.asarray(p_world_m, float) / voxel_m
+    if not np.all(np.isfinite(scaled)) or np.any(np.abs(scaled) > 1e9):
+        return None
+    i, j, k = (int(v) for v in np.floor(scaled))
+    return i, j, k

@@ -31,7 +31,7 @@ import numpy as np
 
 from schemas.robot import SensedContact
 from schemas.scene import SphereObstacle
-from services.robot.clearance import Capsule, axis_distances_m
+from services.robot.clearance import Capsule, axis_distances_m, voxel_key
 from services.scene.occupancy import keep_out_spheres
 
 PREFIX = "touched_"  # the names of its spheres: the planner tells them from branches
@@ -80,7 +80,7 @@ class TouchedSpace:
             p = np.asarray(c.point_world_m, dtype=float)
             if ignore and bool(np.any(axis_distances_m(p, ignore) < radii)):
                 continue
-            key = self._key(p)
+            key = voxel_key(p, self.p.voxel_m)
             if key is None:
                 continue
             v = self.voxels.get(key)
@@ -150,10 +150,3 @@ class TouchedSpace:
             on = np.linalg.norm(centres_m - v.center_m, axis=1) <= radii_m
             ids.update(int(i) for i in np.asarray(ids_on)[on])
         return tuple(sorted(ids))
-
-    def _key(self, p: np.ndarray) -> tuple[int, int, int] | None:
-        scaled = p / self.p.voxel_m
-        if not np.all(np.isfinite(scaled)) or np.any(np.abs(scaled) > 1e9):
-            return None
-        i, j, k = (int(v) for v in np.floor(scaled))
-        return i, j, k
