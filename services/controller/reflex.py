@@ -87,8 +87,9 @@ class ContactReflex:
     def _expire(self, now_ns: int) -> None:
         old = [k for k, v in self.voxels.items() if now_ns - v.last_ns > self.p.hold_ns]
         excess = len(self.voxels) - len(old) - self.p.max_spheres
-        if excess > 0:
-            live = sorted((v.last_ns, k) for k, v in self.voxels.items() if k not in set(old))
+        if excess > 0:  # the least recently felt go first (then by voxel: deterministic)
+            gone = set(old)
+            live = sorted((v.last_ns, k) for k, v in self.voxels.items() if k not in gone)
             old += [k for _t, k in live[:excess]]
         for k in old:
             del self.voxels[k]
