@@ -25,7 +25,7 @@ import numpy as np
 
 from schemas.robot import SensedContact
 from schemas.scene import SceneState
-from services.robot.clearance import Capsule, axis_distances_m, voxel_key
+from services.robot.clearance import Capsule, axis_distances_m, inner_working_space, voxel_key
 
 
 @dataclass(frozen=True)
@@ -111,6 +111,7 @@ def inner_space(
         if f.fruit_id not in wanted:
             continue
         centre = np.array(f.position_world_m, dtype=float)
-        top = centre + np.array([0.0, 0.0, f.semi_axis_v_m + p.inner_twig_m])
-        out.append((centre, top, f.semi_axis_v_m + p.inner_clearance_m))
+        out.append(
+            inner_working_space(centre, f.semi_axis_v_m, p.inner_clearance_m, p.inner_twig_m)
+        )
     return out

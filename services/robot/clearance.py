@@ -82,3 +82,14 @@ def voxel_key(p_world_m: np.ndarray, voxel_m: float) -> tuple[int, int, int] | N
         return None
     i, j, k = (int(v) for v in np.floor(scaled))
     return i, j, k
+
+
+def inner_working_space(
+    centre_world_m: np.ndarray, semi_axis_v_m: float, clearance_m: float, twig_m: float
+) -> Capsule:
+    """A fruit's inner working space, where the tools touch it on purpose: a capsule from its
+    centre up its twig to ``semi_axis_v_m + twig_m`` above it, radius ``semi_axis_v_m +
+    clearance_m`` (the scene's keep-out and felt places, the controller's reflex)."""
+    centre = np.asarray(centre_world_m, float)
+    top = centre + np.array([0.0, 0.0, semi_axis_v_m + twig_m])
+    return centre, top, semi_axis_v_m + clearance_m

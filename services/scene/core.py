@@ -34,7 +34,7 @@ from schemas.harvest import HarvestEvent
 from schemas.perception import Tracks
 from schemas.robot import JointState
 from schemas.scene import Fruit, FruitFlag, SceneState, SphereObstacle, Trunk
-from services.robot.clearance import Capsule, RobotBody, axis_distances_m
+from services.robot.clearance import Capsule, RobotBody, axis_distances_m, inner_working_space
 from services.runtime import ConfigError, Output, Stamper
 from services.scene import Settings
 from services.scene.fruit3d import EstimateFailure, FruitEstimate, FruitParams, estimate_fruit
@@ -233,9 +233,14 @@ class SceneCore:
         if selected is None:
             return []
         st = selected.state
-        centre = st.position_world_m
-        top = centre + np.array([0.0, 0.0, st.semi_axis_v_m + self.s.occupancy_inner_twig_m])
-        return [(centre, top, st.semi_axis_v_m + self.s.occupancy_inner_clearance_m)]
+        return [
+            inner_working_space(
+                st.position_world_m,
+                st.semi_axis_v_m,
+                self.s.occupancy_inner_clearance_m,
+                self.s.occupancy_inner_twig_m,
+            )
+        ]
 
     def _selected(self) -> Entry | None:
         """The fruit the tools work on: as it hung at the cut, or the planner's target."""
