@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntEnum
+from typing import Any
 
 import numpy as np
 
@@ -51,7 +52,12 @@ class Hit:
 
 
 def _local_dir(s: CamShape, X: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, ...]:
-    Rt = s.R.T.astype(F32)
+    return rays_local(s.R.T.astype(F32), X, Y)
+
+
+def rays_local(Rt: np.ndarray, X: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Ray directions (X, Y, 1) in a shape's local frame, ``Rt`` = Rᵀ in float32: (3, 3), or
+    (3, 3, n) with a rotation per pixel of 1-D X, Y (one formula, so the same bits)."""
     return tuple(Rt[i, 0] * X + Rt[i, 1] * Y + Rt[i, 2] for i in range(3))
 
 
@@ -130,15 +136,21 @@ def _box(s: CamShape, X: np.ndarray, Y: np.ndarray, near: float) -> Hit:
 
 
 def _leaf(s: CamShape, X: np.ndarray, Y: np.ndarray, near: float) -> Hit:
-    """A lanceolate leaf: |y| ≤ w·(1 - (x/L)²) in its plane (pointed at both ends)."""
-    L, w = F32(s.size[0]), F32(s.size[1])
-    ox, oy, oz = (F32(v) for v in s.origin_local)
-    qx, qy, qz = _local_dir(s, X, Y)
-    t = -oz / qz
-    lx = (ox + t * qx) / L
-    ly = oy + t * qy
-    mask = (t > near) & (np.abs(ly) <= w * (F32(1) - lx * lx))
+    q = _local_dir(s, X, Y)
+    o = s.origin_local.astype(F32)
+    mask, t = leaf_hits(o, q, F32(s.size[0]), F32(s.size[1]), near)
     return Hit(mask, t)
+
+
+def leaf_hits(
+    o: np.ndarray, q: tuple[np.ndarray, ...], L: Any, w: Any, near: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """A lanceolate leaf: |y| ≤ w·(1 - (x/L)²) in its plane (pointed at both ends). ``o``: the
+    camera in the leaf's frame, (3,) or (3, n) per pixel, as ``L`` and ``w`` (float32)."""
+    t = -o[2] / q[2]
+    lx = (o[0] + t * q[0]) / L
+    ly = o[1] + t * q[1]
+    return (t > near) & (np.abs(ly) <= w * (F32(1) - lx * lx)), t
 
 
 def local_point(s: CamShape, X: np.ndarray, Y: np.ndarray, t: np.ndarray) -> np.ndarray:

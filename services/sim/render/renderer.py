@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from services.sim.render.camera import CameraModel
+from services.sim.render.leaves import LeafDraw, batchable, draw_leaves
 from services.sim.render.raycast import CamShape, Shape, intersect, local_point, normals
 from services.sim.render.scene import KINDS, RenderObject
 from services.sim.render.shading import LightCam, Lighting, Material, light_in_camera, shade
@@ -121,10 +122,12 @@ class Renderer:
                 self._kinds.append(KINDS.index(o.kind))
         self._update_cache(objects)
         out = self._cache.copy()
+        leaves: list[LeafDraw] = []
         for o in objects:
             if o.key not in self._baked:
                 placed = self._place(o)
-                self._draw_object(placed, out, None, keep_mask=True)
+                self._draw_object(placed, out, None, keep_mask=True, leaves=leaves)
+        self._draw_leaves(leaves, out)
         depth = np.where(np.isfinite(out.depth), out.depth, F32(0))
         fruits = {
             o.fruit_id: self._masks[o.key]
@@ -167,6 +170,7 @@ class Renderer:
             self._repaint(r)
         if not self.cache:
             return
+        leaves: list[LeafDraw] = []
         for o in objects:
             if (
                 o.bakeable
@@ -174,14 +178,17 @@ class Renderer:
                 and self._track[o.key].still >= self.bake_after
             ):
                 placed = self._place(o)
-                self._draw_object(placed, self._cache, None, keep_mask=True)
+                self._draw_object(placed, self._cache, None, keep_mask=True, leaves=leaves)
                 self._baked[o.key] = placed
+        self._draw_leaves(leaves, self._cache)
 
     def _repaint(self, r: Rect) -> None:
         self._cache.reset(r, self._bg)
+        leaves: list[LeafDraw] = []
         for placed in self._baked.values():
             if placed.rect is not None and _overlap(placed.rect, r) is not None:
-                self._draw_object(placed, self._cache, r, keep_mask=False)
+                self._draw_object(placed, self._cache, r, keep_mask=False, leaves=leaves)
+        self._draw_leaves(leaves, self._cache)
 
     # ---- drawing ---------------------------------------------------------------------------
     def _place(self, o: RenderObject) -> _Placed:
@@ -196,8 +203,16 @@ class Renderer:
         return _Placed(o, self._index[o.key], shapes, rect)
 
     def _draw_object(
-        self, placed: _Placed, buf: Buffers, clip: Rect | None, keep_mask: bool
+        self,
+        placed: _Placed,
+        buf: Buffers,
+        clip: Rect | None,
+        keep_mask: bool,
+        leaves: list[LeafDraw],
     ) -> None:
+        """Draw ``placed``'s shapes in order; leaves join ``leaves``, the batch the caller
+        draws after the last object (any other shape draws the batch so far first, so the
+        order of the draws, which decides depth ties, is kept)."""
         o = placed.obj
         want_mask = keep_mask and o.kind == "fruit" and placed.rect is not None
         acc = np.zeros(_shape(placed.rect), bool) if want_mask and placed.rect else None
@@ -207,12 +222,25 @@ class Renderer:
             rr = _overlap(r, clip) if clip is not None else r
             if rr is None:
                 continue
+            if acc is None and batchable(cs, mat):
+                leaves.append(LeafDraw(cs, mat, rr, placed.index))
+                continue
+            self._draw_leaves(leaves, buf)
             self._draw_shape(cs, mat, rr, placed.index, buf, acc, placed.rect)
         if keep_mask and o.kind == "fruit":
             if acc is not None and placed.rect is not None:
                 self._masks[o.key] = FruitMask(placed.index, placed.rect, acc)
             else:
                 self._masks[o.key] = FruitMask(placed.index, (0, 0, 0, 0), np.zeros((0, 0), bool))
+
+    def _draw_leaves(self, leaves: list[LeafDraw], buf: Buffers) -> None:
+        """Draw the pending leaves as one batch (same bits as one by one) and empty the list."""
+        if not leaves:
+            return
+        self._stats.drawn += len(leaves)
+        X, Y = self.camera.rays
+        draw_leaves(leaves, X, Y, self.camera.near_m, self.light, buf)
+        leaves.clear()
 
     def _draw_shape(
         self,

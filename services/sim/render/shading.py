@@ -8,7 +8,7 @@ no transcendental functions, hence bit-identical from run to run.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -90,6 +90,13 @@ def value_noise(p: np.ndarray, seed: int = 0) -> np.ndarray:
 
 
 # ---- textures ---------------------------------------------------------------------------------
+def leaf_shade(strength: Any, local: np.ndarray) -> np.ndarray:
+    """The leaf texture's factor: a lighter midrib along x, darker towards the tip (cheap:
+    leaves sway, so they are redrawn often). ``strength``: float32, or one per point."""
+    v = F32(0.97) - strength * F32(2.5) * np.abs(local[:, 0])
+    return np.where(np.abs(local[:, 1]) < F32(0.0018), v * F32(1.18), v)
+
+
 def albedo(m: Material, local: np.ndarray) -> np.ndarray:
     """Per-pixel albedo (n, 3) for local hit points (n, 3)."""
     base = np.asarray(m.rgb, F32)[None, :]
@@ -104,10 +111,8 @@ def albedo(m: Material, local: np.ndarray) -> np.ndarray:
         v = F32(0.9) + k * F32(0.22) * (
             value_noise(local * np.array([70, 70, 7], F32), m.seed) - F32(0.5)
         )
-    elif m.texture == "leaf":  # a lighter midrib along x, darker towards the tip (cheap: leaves
-        # sway, so they are redrawn often)
-        v = F32(0.97) - k * F32(2.5) * np.abs(local[:, 0])
-        v = np.where(np.abs(local[:, 1]) < F32(0.0018), v * F32(1.18), v)
+    elif m.texture == "leaf":
+        v = leaf_shade(k, local)
     elif m.texture == "ground":
         v = F32(0.75) + k * (
             F32(0.35) * value_noise(local * F32(2.5), m.seed)
@@ -133,13 +138,8 @@ def shade(
     ``view`` holds the ray directions (n, 3) (camera → surface). Two-sided surfaces (leaves) turn
     their normal towards the camera and let a little light through from behind."""
     if two_sided:
-        flip = dot(n, view) > 0
-        n = np.where(flip[:, None], -n, n)
-    ndl = dot(n, light.L)
-    lit = np.maximum(ndl, F32(0))
-    if two_sided:
-        lit = lit + F32(0.35) * np.maximum(-ndl, F32(0))
-    rgb = albedo(m, local) * (light.ambient + light.diffuse * lit)[:, None]
+        n = towards_camera(n, view)
+    rgb = albedo(m, local) * irradiance(n, light, two_sided)[:, None]
     if m.specular > 0:
         h = unit(light.L[None, :] - unit(view))
         s = np.maximum(dot(n, h), F32(0))
@@ -147,3 +147,19 @@ def shade(
             s = s * s
         rgb = rgb + (F32(m.specular) * s)[:, None]
     return rgb * light.colour[None, :]
+
+
+def towards_camera(n: np.ndarray, view: np.ndarray) -> np.ndarray:
+    """A two-sided surface's normals (n, 3) turned to face the rays ``view`` (n, 3)."""
+    flip = dot(n, view) > 0
+    return np.where(flip[:, None], -n, n)
+
+
+def irradiance(n: np.ndarray, light: LightCam, two_sided: bool) -> np.ndarray:
+    """ambient + diffuse·max(0, n·L) per point (n, 3 normals facing the camera); a two-sided
+    surface also lets 0.35 of the light through from behind."""
+    ndl = dot(n, light.L)
+    lit = np.maximum(ndl, F32(0))
+    if two_sided:
+        lit = lit + F32(0.35) * np.maximum(-ndl, F32(0))
+    return light.ambient + light.diffuse * lit
