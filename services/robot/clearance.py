@@ -67,6 +67,29 @@ def axis_distances_m(p_world_m: np.ndarray, capsules: Sequence[Capsule]) -> np.n
     return out
 
 
+def within_reach(
+    points_world_m: np.ndarray, capsules: Sequence[Capsule], reach_m: np.ndarray
+) -> np.ndarray:
+    """(N,) whether each point lies within ``reach_m`` (one per capsule) of some capsule's
+    axis: ``np.any(axis_distances_m(p, capsules) < reach_m)`` for every point at once. The
+    batch's distances may differ from the one-point sums in the last bits, so a point within
+    1e-9 m of a threshold is decided by ``axis_distances_m`` itself: the same verdicts."""
+    pts = np.asarray(points_world_m, float).reshape(-1, 3)
+    if not capsules or not len(pts):
+        return np.zeros(len(pts), bool)
+    a = np.array([c[0] for c in capsules], float)  # (M, 3)
+    ab = np.array([c[1] for c in capsules], float) - a
+    denom = np.maximum(np.einsum("mk,mk->m", ab, ab), 1e-12)
+    rel = pts[:, None, :] - a[None, :, :]  # (N, M, 3)
+    t = np.clip(np.einsum("nmk,mk->nm", rel, ab) / denom, 0.0, 1.0)
+    d = np.linalg.norm(rel - t[:, :, None] * ab[None, :, :], axis=2)
+    reach = np.asarray(reach_m, float)
+    out = np.asarray((d < reach).any(axis=1), dtype=bool)
+    for i in np.flatnonzero((np.abs(d - reach) <= 1e-9).any(axis=1)):
+        out[i] = bool(np.any(axis_distances_m(pts[i], capsules) < reach))
+    return out
+
+
 def distance_to_home_robot_m(p_world_m: np.ndarray) -> float:
     """Distance from a point to the robot's surface at HOME_RAD, m (negative: inside)."""
     caps = home_capsules()

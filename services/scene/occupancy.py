@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from schemas.scene import SphereObstacle
-from services.robot.clearance import Capsule, axis_distances_m
+from services.robot.clearance import Capsule, within_reach
 from services.scene.geometry import Pinhole, RigidTransform, vec3
 
 BLANK_WINDOW_PX = 3  # bark this near a voxel's pixel: the branch may still stand there
@@ -348,16 +348,12 @@ def keep_out_spheres(
     ``own_fruit_ids``."""
     in_keep_out, keep_out, inside_cylinder = test
     radii = np.array([kr for _a, _b, kr in keep_out])
-    kept: list[tuple[int, tuple[int, int, int], np.ndarray]] = []
-    for order, key, c in voxels:
-        inside = bool(keep_out) and bool(np.any(axis_distances_m(c, keep_out) < radii + r))
-        if inside != in_keep_out:
-            continue
-        if inside_cylinder is not None:
-            axis, radius = inside_cylinder
-            if float(np.hypot(c[0] - axis[0], c[1] - axis[1])) < radius:
-                continue
-        kept.append((order, key, c))
+    centres = np.array([c for _o, _k, c in voxels], float).reshape(-1, 3)
+    take = within_reach(centres, keep_out, radii + r) == in_keep_out
+    if inside_cylinder is not None:
+        axis, radius = inside_cylinder
+        take &= ~(np.hypot(centres[:, 0] - axis[0], centres[:, 1] - axis[1]) < radius)
+    kept = [v for v, keep in zip(voxels, take, strict=True) if keep]
     kept.sort(key=lambda t: (t[0], t[1]))
     own = owners or {}
     return tuple(
