@@ -86,9 +86,9 @@ def test_a_batch_of_leaves_equals_drawing_them_one_by_one(seed: int) -> None:
 
 
 def test_renders_with_leaves_in_several_objects_keep_the_order_of_the_draws() -> None:
-    """Leaves, a fruit between them and more leaves: the batch is drawn before the fruit, so a
-    frame equals one in which every shape was drawn alone (the renderer's own cache test
-    covers the sim's scenes)."""
+    """Leaves, a fruit between them and more leaves: the batch is drawn before the fruit, and
+    the leaves' rectangles (computed together) hold every pixel of each leaf's own, so a frame
+    equals one in which every shape was drawn alone in its own rectangle."""
     rng = np.random.default_rng(5)
     cam, T = CameraModel(), head_camera_pose()
     leaves = _leaves(rng, T, 30)
@@ -121,10 +121,13 @@ def test_renders_with_leaves_in_several_objects_keep_the_order_of_the_draws() ->
         np.full((H, W), -1, np.int32),
     )
     for o in objs:
-        placed = r._place(o)
-        for cs, mat, rect in placed.shapes:
+        index = r.index_of(o.key)
+        assert index is not None
+        for prim in o.prims:  # each shape alone, in its own rectangle
+            cs = prim.in_camera(r.T_cam_world)
+            rect = r._screen_rect(cs)
             if rect is not None:
-                r._draw_shape(cs, mat, rect, placed.index, buf, None, None)
+                r._draw_shape(cs, prim.material, rect, index, buf, None, None)
     assert np.array_equal(out.rgb, buf.rgb)
     assert np.array_equal(out.label, buf.label)
     assert np.array_equal(out.depth_m, np.where(np.isfinite(buf.depth), buf.depth, 0))

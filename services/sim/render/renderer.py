@@ -194,9 +194,12 @@ class Renderer:
     def _place(self, o: RenderObject) -> _Placed:
         shapes = []
         rect: Rect | None = None
-        for prim in o.prims:
-            cs = prim.in_camera(self.T_cam_world)
-            r = self._screen_rect(cs)
+        cams = [prim.in_camera(self.T_cam_world) for prim in o.prims]
+        if o.kind == "leaf" and len(cams) > 1:
+            rects = self._screen_rects(cams)
+        else:
+            rects = [self._screen_rect(cs) for cs in cams]
+        for prim, cs, r in zip(o.prims, cams, rects, strict=True):
             shapes.append((cs, prim.material, r))
             if r is not None:
                 rect = r if rect is None else _union(rect, r)
@@ -292,6 +295,45 @@ class Renderer:
         if u0 >= u1 or v0 >= v1:
             return None
         return (v0, v1, u0, u1)
+
+    def _screen_rects(self, cams: list[CamShape]) -> list[Rect | None]:
+        """``_screen_rect`` of many shapes at once (a cluster's leaves, redrawn every frame
+        while they sway), a pixel wider on every side and tolerant at the near plane: the
+        batch's sums may round apart from the one-shape product in the last bits, and a rect
+        that is never narrower leaves every drawn pixel as it was (each is a function of its
+        shape alone)."""
+        H, W = self.camera.height, self.camera.width
+        k, near = self.camera.intrinsics, self.camera.near_m
+        R = np.stack([cs.R for cs in cams])
+        p = np.stack([cs.p for cs in cams])
+        size = np.stack([cs.size for cs in cams])
+        corners = p[:, None, :] + np.einsum("ck,nk,njk->ncj", _CORNERS, size, R)
+        z = corners[..., 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = k.fx_px * corners[..., 0] / z + k.cx_px
+            v = k.fy_px * corners[..., 1] / z + k.cy_px
+        u0 = np.floor(u.min(1)) - 1
+        u1 = np.ceil(u.max(1)) + 2
+        v0 = np.floor(v.min(1)) - 1
+        v1 = np.ceil(v.max(1)) + 2
+        out: list[Rect | None] = []
+        for zmin, zmax, a0, a1, b0, b1 in zip(
+            z.min(1).tolist(),
+            z.max(1).tolist(),
+            v0.tolist(),
+            v1.tolist(),
+            u0.tolist(),
+            u1.tolist(),
+            strict=True,
+        ):
+            if zmax <= near - 1e-9:
+                out.append(None)
+            elif zmin <= near + 1e-9:
+                out.append((0, H, 0, W))
+            else:
+                r = (max(0, int(a0)), min(H, int(a1)), max(0, int(b0)), min(W, int(b1)))
+                out.append(r if r[0] < r[1] and r[2] < r[3] else None)
+        return out
 
 
 def _shape(r: Rect | None) -> tuple[int, int]:
