@@ -74,7 +74,7 @@ def draw_leaves(
         q = rays_local(Rt, x, y)
         hit, t = leaf_hits(o, q, L, w, near_m)
         ok = hit & (t < buf.depth.reshape(-1)[flat])
-        win = _nearest_first(flat, t, ok, buf.depth.size)
+        win = _nearest_first(flat, t, ok)
     if win.size == 0:
         return
     v, u = np.divmod(flat[win], W)
@@ -108,12 +108,12 @@ class _Spread:
         return np.take(by_leaf, self.leaf[at], axis=-1)
 
 
-def _nearest_first(flat: np.ndarray, t: np.ndarray, ok: np.ndarray, n_px: int) -> np.ndarray:
+def _nearest_first(flat: np.ndarray, t: np.ndarray, ok: np.ndarray) -> np.ndarray:
     """Per pixel, the element with the smallest ``t`` among ``ok``, the earliest on ties (only
     pixels where leaves overlap need the sort)."""
     cand = np.flatnonzero(ok)
     f = flat[cand]
-    shared = np.bincount(f, minlength=n_px)[f] > 1
+    shared = np.bincount(f)[f] > 1
     c = cand[shared]
     c = c[np.lexsort((c, t[c], flat[c]))]
     first = np.ones(c.size, bool)

@@ -18,13 +18,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from services.sim.render.camera import CameraModel
-from services.sim.render.leaves import LeafDraw, batchable, draw_leaves
+from services.sim.render.leaves import LeafDraw, Rect, batchable, draw_leaves
 from services.sim.render.raycast import CamShape, Shape, intersect, local_point, normals
 from services.sim.render.scene import KINDS, RenderObject
 from services.sim.render.shading import LightCam, Lighting, Material, light_in_camera, shade
 
 F32 = np.float32
-Rect = tuple[int, int, int, int]  # v0, v1, u0, u1 (end exclusive)
 _CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
 
 
