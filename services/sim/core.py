@@ -55,6 +55,13 @@ log = logging.getLogger("sim")
 CAMERA_FRAME_ID = "camera_optical"
 
 
+def began(at_world_m: tuple[float, float, float]) -> str:
+    """A begun contact's detail: where it touched the other body (world, m), for finding what
+    in the tree the arms meet (``startswith("contact began")`` is the test for a beginning)."""
+    x, y, z = at_world_m
+    return f"contact began at ({x:+.4f}, {y:+.4f}, {z:+.4f}) m"
+
+
 class SimCore:
     """The simulated world behind camera/rgbd, robot/joint_state, sim/truth and sim/events."""
 
@@ -197,13 +204,15 @@ class SimCore:
     def _count_contacts(self) -> None:
         bodies = self.physics.tree_bodies | self.fruits.attached_bodies()
         names = self.physics.names
-        points = {k: p for k, p in self.physics.robot_contact_points().items() if k[1] in bodies}
-        now = {(link, names[b]) for link, b in points}
+        pairs = {k: p for k, p in self.physics.robot_contact_pairs().items() if k[1] in bodies}
+        points = {k: on_link for k, (on_link, _) in pairs.items()}
+        on_other = {(link, names[b]): p for (link, b), (_, p) in pairs.items()}
+        now = set(on_other)
         # What the arms feel (JointState.contacts): one point per link and body, in link order.
         self.felt = [(k[0], points[k]) for k in sorted(points, key=lambda k: (k[0], names[k[1]]))]
         for pair in sorted(now - set(self.contacts)):
             self.counters["contacts"] += 1
-            self.pending.append(Ev("collision", None, pair[0], pair[1], "contact began"))
+            self.pending.append(Ev("collision", None, pair[0], pair[1], began(on_other[pair])))
         for pair in sorted(set(self.contacts) - now):
             n = self.contacts.pop(pair)
             self.pending.append(

@@ -21,6 +21,12 @@ from services.sim.world import World
 FRUIT_DENSITY_KG_M3 = 850.0
 ROBOT_MOTOR_FORCE = 2000.0
 TOUCH_M = 0.001  # pybullet also reports points a little apart: touching = closer than this
+Point = tuple[float, float, float]  # world frame, m
+
+
+def _point(v: Iterable[float]) -> Point:
+    x, y, z = v
+    return (float(x), float(y), float(z))
 
 
 def ellipsoid_vertices(semi_axes: tuple[float, float, float], n: int = 10) -> list[list[float]]:
@@ -180,15 +186,19 @@ class Physics:
     def robot_contact_points(self) -> dict[tuple[str, int], tuple[float, float, float]]:
         """(robot link name, other body id) → the point on the link of the pair's deepest
         contact, world frame, m."""
-        best: dict[tuple[str, int], tuple[float, tuple[float, float, float]]] = {}
+        return {k: on_link for k, (on_link, _on_other) in self.robot_contact_pairs().items()}
+
+    def robot_contact_pairs(self) -> dict[tuple[str, int], tuple[Point, Point]]:
+        """(robot link name, other body id) → the pair's deepest contact: its point on the link
+        and its point on the other body, world frame, m."""
+        best: dict[tuple[str, int], tuple[float, Point, Point]] = {}
         for cp in self.pb.getContactPoints(bodyA=self.robot, physicsClientId=self.cid):
             if cp[2] == self.robot or cp[8] >= TOUCH_M:
                 continue
             key = (self.link_name[cp[3]], cp[2])
             if key not in best or cp[8] < best[key][0]:
-                on_link = (float(cp[5][0]), float(cp[5][1]), float(cp[5][2]))
-                best[key] = (cp[8], on_link)
-        return {k: p for k, (_d, p) in best.items()}
+                best[key] = (cp[8], _point(cp[5]), _point(cp[6]))
+        return {k: (a, b) for k, (_d, a, b) in best.items()}
 
     def tree_contacts_at(self, q: np.ndarray) -> list[tuple[str, str]]:
         """(robot link, tree body) pairs that would touch with the joints at ``q``
