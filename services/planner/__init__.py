@@ -135,6 +135,17 @@ class Settings(ServiceSettings):
         "with the dish right under the tip and, if those are clear, send the controller those "
         "(the IK measures the dish where it is sent; the back place is the rule, not a need).",
     )
+    branch_check_dish_lower_m: float = Field(
+        default=0.0,
+        ge=0,
+        le=0.06,
+        description="… when a tool of the chosen poses lies in the occupied spheres (within "
+        "branch_check_depth_m, or refused), check them with the dish this much lower (its rim "
+        "further under the fruit; the fruit falls that much farther) and take those if their "
+        "tools go at least 5 mm less deep, the IK reaches them, and no fruit comes into the "
+        "tools' way (the dish's rim met branches passing 5-7 cm behind and under the fruit it "
+        "waited under, orchard seed 0); 0: off, m.",
+    )
     branch_check_recheck_s: float = Field(
         default=3.0,
         ge=0,

@@ -145,6 +145,7 @@ class FruitRecord:
     scene_mark_ok: bool = True  # False: its ID was another fruit's, whose scene mark it carries
     reach: tuple[ReachVerdict, ReachVerdict] | None = None  # harvest pose, pre-pose
     dish_back_m: float | None = None  # the dish's place the branch check chose (None: the rule)
+    dish_lower_m: float = 0.0  # … and how much lower than the rule it put the dish, m
     branch_refused_ns: int | None = None  # the branch check's first refusal (None: none yet)
     last_seen_ns: int | None = None  # the last scene stamp with a fresh sighting of any of its IDs
     first_seen_ns: int | None = None  # the first such stamp

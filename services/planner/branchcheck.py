@@ -173,6 +173,27 @@ class BranchCheck:
                 return BranchVerdict(False, name, depth, len(sols), sphere)
         return BranchVerdict(True)
 
+    def poses_depth_m(
+        self,
+        kin: Kinematics,
+        fruit: FruitShape,
+        poses: list[tuple[str, ToolPoses]],
+        fruit_ids: frozenset[int] = frozenset(),
+    ) -> float:
+        """How deep the clearest IK solution's tools go into the spheres at the deepest of
+        ``poses`` (0: clear of them; poses out of reach are not measured), m: what ``check``
+        compares with ``depth_m``."""
+        spheres = self.in_the_way(fruit, fruit_ids)
+        if not spheres:
+            return 0.0
+        self.space.set_obstacles(Obstacles(spheres=spheres))
+        depths = [0.0]
+        for _name, pose in poses:
+            sols = kin.solutions(pose)
+            if sols:
+                depths.append(min(self._deepest(s.q_rad, spheres)[0] for s in sols))
+        return max(depths)
+
     def tool_depth_m(self, q_rad: np.ndarray) -> float:
         """How deep the deepest tool body goes into the spheres at ``q_rad`` (0: clear), m."""
         return self._deepest(q_rad, ())[0]

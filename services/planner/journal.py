@@ -68,6 +68,7 @@ def _record(r: FruitRecord) -> dict[str, Any]:
         "last_seen_ns": r.last_seen_ns,
         "sightings": r.sightings,
         "dish_back_m": r.dish_back_m,
+        "dish_lower_m": r.dish_lower_m,
         "branch_refused_ns": r.branch_refused_ns,
     }
 
@@ -96,16 +97,18 @@ def _unrecord(d: dict[str, Any]) -> FruitRecord:
         last_seen_ns=d.get("last_seen_ns"),
         sightings=d.get("sightings", MIN_SIGHTINGS),  # older journals: records were fruit
         dish_back_m=_metres_or_none(d.get("dish_back_m")),  # a cut awaited leaves with it
+        dish_lower_m=_metres_or_none(d.get("dish_lower_m", 0.0), "dish_lower_m") or 0.0,
         branch_refused_ns=_stamp_or_none(d.get("branch_refused_ns")),
     )
 
 
-def _metres_or_none(v: Any) -> float | None:
-    """A record's ``dish_back_m``: None (the pose rule; older journals) or a finite float."""
+def _metres_or_none(v: Any, name: str = "dish_back_m") -> float | None:
+    """A record's ``dish_back_m`` (``name``): None (the pose rule; older journals) or a finite
+    float."""
     if v is None:
         return None
     if type(v) not in (int, float) or not np.isfinite(v):
-        raise ValueError(f"dish_back_m {v!r} is not a distance in metres")
+        raise ValueError(f"{name} {v!r} is not a distance in metres")
     return float(v)
 
 

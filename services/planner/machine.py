@@ -57,6 +57,7 @@ from services.planner.poses import (
 from services.planner.retrace import JointPath, Retrace
 
 NS = 1_000_000_000
+DISH_LOWER_GAIN_M = 0.005  # a lower dish is taken when its tools go this much less deep, m
 
 
 @dataclass(frozen=True)
@@ -212,7 +213,7 @@ class Machine:
         poses = pre_pose if self.phase in ("approach", "leave") else harvest_pose
         return Goal(
             self.phase,
-            poses(self._aimed(rec), self.pose_settings, rec.dish_back_m),
+            poses(self._aimed(rec), self._settings_for(rec), rec.dish_back_m),
             rec.fruit_id,
             self._ignore(rec if touching else None),
         )
@@ -331,7 +332,7 @@ class Machine:
         follow; None: no planner, no joint state or no path (the pose goals)."""
         if self.motion is None or self.q_rad is None:
             return None
-        p = pre_pose(rec.planned, self.pose_settings, rec.dish_back_m)
+        p = pre_pose(rec.planned, self._settings_for(rec), rec.dish_back_m)
         goals = self.kin.solutions(p)
         if not goals:
             return None
@@ -752,11 +753,12 @@ class Machine:
         if self.crowd is None:
             return None
         present = self._on_tree(rec)
+        settings = self._settings_for(rec)
         crowding = self.crowd.crowders(
             self.kin,
             [
-                ("harvest pose", harvest_pose(rec.planned, self.pose_settings, rec.dish_back_m)),
-                ("pre-pose", pre_pose(rec.planned, self.pose_settings, rec.dish_back_m)),
+                ("harvest pose", harvest_pose(rec.planned, settings, rec.dish_back_m)),
+                ("pre-pose", pre_pose(rec.planned, settings, rec.dish_back_m)),
             ],
             [r.planned for r in present],
         )
@@ -889,17 +891,22 @@ class Machine:
             and not self._ghost(r)
         ]
 
-    def _blockers(self, rec: FruitRecord) -> list[FruitRecord]:
-        """Fruit on the tree (seen, not known to be off it) where the tools go for ``rec``."""
-        return [r for r, _ in self._blocker_depths(rec)]
+    def _blockers(
+        self, rec: FruitRecord, settings: PoseSettings | None = None
+    ) -> list[FruitRecord]:
+        """Fruit on the tree (seen, not known to be off it) where the tools go for ``rec`` (with
+        ``settings``' poses; None: the record's own)."""
+        return [r for r, _ in self._blocker_depths(rec, settings)]
 
-    def _blocker_depths(self, rec: FruitRecord) -> list[tuple[FruitRecord, float]]:
+    def _blocker_depths(
+        self, rec: FruitRecord, settings: PoseSettings | None = None
+    ) -> list[tuple[FruitRecord, float]]:
         """The blockers of ``rec`` and how far each reaches into its tools' way, m."""
         present = self._on_tree(rec)
         depths = intrusions_m(
             rec.planned,
             [r.planned for r in present],
-            self.pose_settings,
+            settings or self._settings_for(rec),
             self.s.neighbour_clearance_m,
         )
         return [(r, d) for r, d in zip(present, depths, strict=True) if d > 0]
@@ -931,7 +938,7 @@ class Machine:
         hv, pv = rec.reach
         if hv.reachable and pv.reachable:
             if self.branches is None:
-                rec.dish_back_m = None
+                rec.dish_back_m, rec.dish_lower_m = None, 0.0
                 return True
             verdict = self._branch_verdict(rec, h, p)
             if verdict.clear:
@@ -960,8 +967,19 @@ class Machine:
         whose poses the controller is then sent (``rec.dish_back_m``). The rule's verdict names
         a refusal."""
         assert self.branches is not None
-        rec.dish_back_m = None
+        rec.dish_back_m, rec.dish_lower_m = None, 0.0
         ids = frozenset((rec.key, rec.fruit_id))
+        verdict = self._rule_or_under(rec, h, p, ids)
+        if self.s.branch_check_dish_lower_m > 0.0:
+            verdict = self._dish_lower(rec, h, p, ids, verdict)
+        return verdict
+
+    def _rule_or_under(
+        self, rec: FruitRecord, h: ToolPoses, p: ToolPoses, ids: frozenset[int]
+    ) -> BranchVerdict:
+        """The rule's verdict, or the dish right under the tip's where that one is clear and
+        the rule's is not (``rec.dish_back_m`` 0)."""
+        assert self.branches is not None
         verdict = self.branches.check(
             self.kin, rec.planned, [("harvest pose", h), ("pre-pose", p)], ids
         )
@@ -977,6 +995,73 @@ class Machine:
             return verdict
         rec.dish_back_m = 0.0
         return alt
+
+    def _dish_lower(
+        self,
+        rec: FruitRecord,
+        h: ToolPoses,
+        p: ToolPoses,
+        ids: frozenset[int],
+        verdict: BranchVerdict,
+    ) -> BranchVerdict:
+        """``branch_check_dish_lower_m``: the chosen poses with the dish that much lower, where
+        a tool of the chosen ones lies in the occupied spheres. Taken (``rec.dish_lower_m``)
+        when its tools go ``DISH_LOWER_GAIN_M`` less deep (or, the chosen refused, not deeper
+        than allowed), the IK reaches both poses and no fruit comes into the tools' way. The
+        rim sits highest of the dish, and a branch under the fruit meets it there (orchard seed
+        0: the rim 1 cm under the fruit touched a branch 7 cm behind and 5 cm under its
+        centre, the pose's tools 1–2 cm into its sphere, within the check's allowance)."""
+        assert self.branches is not None
+        lower = self.s.branch_check_dish_lower_m
+        if verdict.clear:
+            backs: list[float | None] = [rec.dish_back_m]
+        else:
+            backs = (
+                [None]
+                if h.basket_back_m == 0.0 or not self.s.branch_check_dish_under
+                else [None, 0.0]
+            )
+        chosen = [self._dish_moved(x, rec.dish_back_m, 0.0) for x in (h, p)]
+        depth_m = (
+            self.branches.poses_depth_m(self.kin, rec.planned, self._named(chosen), ids)
+            if verdict.clear
+            else np.inf
+        )
+        if depth_m == 0.0:
+            return verdict
+        settings = self._lowered(lower)
+        before = {r.key for r in self._blockers(rec, self.pose_settings)}
+        if any(r.key not in before for r in self._blockers(rec, settings)):
+            return verdict  # a lower dish goes into a neighbour: not lower
+        for back in backs:
+            low = [self._dish_moved(x, back, lower) for x in (h, p)]
+            if not all(self.kin.reach(x).reachable for x in low):
+                continue
+            d = self.branches.poses_depth_m(self.kin, rec.planned, self._named(low), ids)
+            if d <= self.branches.depth_m and d <= depth_m - DISH_LOWER_GAIN_M:
+                rec.dish_back_m, rec.dish_lower_m = back, lower
+                return BranchVerdict(True)
+        return verdict
+
+    @staticmethod
+    def _named(poses: list[ToolPoses]) -> list[tuple[str, ToolPoses]]:
+        return [("harvest pose", poses[0]), ("pre-pose", poses[1])]
+
+    @staticmethod
+    def _dish_moved(x: ToolPoses, back_m: float | None, lower_m: float) -> ToolPoses:
+        """``x`` (the rule's) with the dish ``back_m`` back (None: the rule's) and ``lower_m``
+        lower."""
+        back = x.basket_back_m if back_m is None else back_m
+        return replace(x, basket_back_m=back, basket_below_m=x.basket_below_m + lower_m)
+
+    def _lowered(self, lower_m: float) -> PoseSettings:
+        """The pose settings with the dish ``lower_m`` lower than the rule's."""
+        p = self.pose_settings
+        return replace(p, basket_clearance_m=p.basket_clearance_m + lower_m)
+
+    def _settings_for(self, rec: FruitRecord) -> PoseSettings:
+        """The pose settings of ``rec``'s poses: the dish ``rec.dish_lower_m`` lower."""
+        return self.pose_settings if rec.dish_lower_m == 0.0 else self._lowered(rec.dish_lower_m)
 
     def resume_cut(self, rec: FruitRecord, cut: CutState, now: int, next_seq: int) -> None:
         """A restarted planner (journal.py): the cut of ``rec`` sent before the restart is

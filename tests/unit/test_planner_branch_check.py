@@ -16,8 +16,10 @@ from schemas.base import Header
 from schemas.scene import Obstacles, SceneState, SphereObstacle, Trunk
 from services.planner.bench import fate_of
 from services.planner.branchcheck import BranchCheck
+from services.planner.clutter import intrusions_m
 from services.planner.core import PlannerCore
-from services.planner.poses import harvest_pose
+from services.planner.poses import FruitShape, harvest_pose, pre_pose
+from services.robot.model import TOOLS
 from tests.unit.test_planner_select import A, C, core_with, fruit, select
 
 
@@ -268,3 +270,75 @@ def test_a_branch_behind_the_dish_sends_it_right_under_the_fruit(dish_under: boo
     assert goal.poses is not None and goal.poses.basket_back_m == 0.0
     m.branches.set_scene(scene(()))  # the branch gone: the rule's place again
     assert select(core) == 1 and rec.dish_back_m is None
+
+
+def rim_branch(core: PlannerCore, above_rim_m: float) -> tuple[SphereObstacle, ...]:
+    """A branch across the view 7 cm beyond the middle of fruit 1's dish (the pose rule's),
+    ``above_rim_m`` over its rim top: under the fruit, where the rim meets it."""
+    return branch(dish_level(core) + np.array([0.07, 0.0, TOOLS.basket_rim_height_m + above_rim_m]))
+
+
+def lowering(core: PlannerCore, lower_m: float) -> None:
+    m = core.machine
+    m.s = core.s = core.s.model_copy(update={"branch_check_dish_lower_m": lower_m})
+
+
+@pytest.mark.parametrize("lower_m", [0.0, 0.02])
+def test_a_branch_over_the_rim_sends_the_dish_lower(lower_m: float) -> None:
+    """A branch 1.5 cm over the rule's rim: the tools 15 mm into its spheres, within the 20 mm
+    allowed, so the fruit is taken either way. With ``branch_check_dish_lower_m`` the dish goes
+    that much lower at the harvest pose and the pre-pose (clear of the spheres there), and back
+    to the rule's height once the branch is gone."""
+    core = checking()
+    lowering(core, lower_m)
+    m = core.machine
+    assert m.branches is not None
+    rec = core.book.records[1]
+    m.branches.set_scene(scene(rim_branch(core, 0.015)))
+    assert select(core) == 1 and rec.dish_lower_m == lower_m
+    for phase, rule in (("harvest", harvest_pose), ("approach", pre_pose)):
+        m.phase = phase
+        goal = m.goal()
+        assert goal.poses is not None
+        want = rule(rec.planned, m.pose_settings).basket_below_m + lower_m
+        assert goal.poses.basket_below_m == pytest.approx(want)
+    m.branches.set_scene(scene(()))
+    assert select(core) == 1 and rec.dish_lower_m == 0.0
+
+
+@pytest.mark.parametrize("lower_m", [0.0, 0.02])
+def test_a_branch_on_the_rim_is_cleared_by_a_lower_dish(lower_m: float) -> None:
+    """The branch at the rim's height: the rule's tools 30 mm into its spheres, refused (the
+    fruit waits, as before); the dish 2 cm lower is within the allowance, so it is taken."""
+    core = checking()
+    lowering(core, lower_m)
+    assert core.machine.branches is not None
+    core.machine.branches.set_scene(scene(rim_branch(core, 0.0)))
+    rec = core.book.records[1]
+    if lower_m == 0.0:
+        assert select(core) == 3 and rec.deferred
+        return
+    assert select(core) == 1 and rec.dish_lower_m == lower_m and not rec.deferred
+
+
+def test_the_dish_is_not_lowered_into_a_neighbour() -> None:
+    """A fruit hanging just under where the lower dish would go (clear of the rule's): the
+    dish stays at the rule's height, touching the branch's spheres as allowed."""
+    base = checking()
+    settings = base.machine.pose_settings
+    rec_a = base.book.records[1].planned
+    # 23.5 cm under the tip: a centimetre under the rule's dish sweep (the pre-pose's dish is
+    # the lowest), a centimetre into the sweep of one 2 cm lower.
+    under = harvest_pose(rec_a, settings).tip_world_m - np.array([0.0, 0.0, 0.235])
+    below = fruit(5, (float(under[0]), float(under[1]), float(under[2])), 0.6)
+    shape = FruitShape(np.array(below.position_world_m), 0.04, 0.04)
+    clearance = base.s.neighbour_clearance_m
+    low = replace(settings, basket_clearance_m=settings.basket_clearance_m + 0.02)
+    assert intrusions_m(rec_a, [shape], settings, clearance)[0] <= 0.0
+    assert intrusions_m(rec_a, [shape], low, clearance)[0] > 0.0
+    core = core_with("nearest", fruit(1, A, 0.5), fruit(3, C, 0.7), below)
+    core.s = core.machine.s = core.s.model_copy(update={"branch_check": True})
+    core.machine.branches = BranchCheck(core.s.branch_check_depth_m, 0.1)
+    lowering(core, 0.02)
+    core.machine.branches.set_scene(scene(rim_branch(core, 0.015)))
+    assert select(core) == 1 and core.book.records[1].dish_lower_m == 0.0

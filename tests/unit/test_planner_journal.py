@@ -27,6 +27,7 @@ def book_with_two() -> FruitBook:
     r.outcome_id = 3  # harvested as 3, before its track moved on to 9
     b.records[4].losses, b.records[4].deferred = 1, True
     b.records[4].dish_back_m = 0.0  # the branch check's place for the dish
+    b.records[4].dish_lower_m = 0.02  # … and its height, 2 cm under the rule's
     b.records[4].branch_refused_ns = 12_000_000_000  # its first refusal: looked at again later
     return b
 
@@ -46,6 +47,7 @@ def test_a_journal_gives_back_every_record_and_the_pending_cut(tmp_path: Path) -
     assert got.seen == was.seen and not got.in_scene  # until a scene lists it again
     assert fresh.records[4].losses == 1 and fresh.records[4].deferred
     assert fresh.records[4].dish_back_m == 0.0 and got.dish_back_m is None
+    assert fresh.records[4].dish_lower_m == 0.02 and got.dish_lower_m == 0.0
     assert fresh.records[4].branch_refused_ns == 12_000_000_000 and got.branch_refused_ns is None
     assert fresh.records[4].sightings == b.records[4].sightings == MIN_SIGHTINGS
     # The harvested fruit is never a candidate again; the other one is once it is seen.
@@ -120,6 +122,8 @@ def test_a_cut_sent_before_the_restart_is_confirmed_by_the_basket(tmp_path: Path
         ("dish_back_m", "0.0"),
         ("dish_back_m", float("nan")),
         ("dish_back_m", [0.0]),
+        ("dish_lower_m", "0.02"),
+        ("dish_lower_m", float("inf")),
         ("branch_refused_ns", 1.5e9),
         ("branch_refused_ns", -1),
         ("branch_refused_ns", True),
@@ -136,4 +140,5 @@ def test_a_journal_with_a_bad_dish_place_or_refusal_stamp_starts_afresh(
     assert jr.load(path, b) is None and b.records == {}
     del data["records"][1][field]  # a journal from before the field: the rule, no refusal
     path.write_text(json.dumps(data))
-    assert jr.load(path, b) is not None and getattr(b.records[4], field) is None
+    rule = 0.0 if field == "dish_lower_m" else None
+    assert jr.load(path, b) is not None and getattr(b.records[4], field) == rule
