@@ -622,6 +622,8 @@ class Machine:
         self.path.start(self.q_rad)
         if rec.dish_back_m is not None:
             why += "; the dish right under it (the branches seen leave no room farther back)"
+        if rec.dish_lower_m > 0.0:
+            why += f"; the dish {rec.dish_lower_m * 1e2:.0f} cm lower (a branch seen over its rim)"
         self.events.append(Event("fruit_selected", rec.fruit_id, reason=why))
         self.progress = Progress(now, self.next_seq)
         self.replans_left = self.s.plan_retries

@@ -296,6 +296,8 @@ def test_a_branch_over_the_rim_sends_the_dish_lower(lower_m: float) -> None:
     rec = core.book.records[1]
     m.branches.set_scene(scene(rim_branch(core, 0.015)))
     assert select(core) == 1 and rec.dish_lower_m == lower_m
+    (why,) = [e.reason for e in m.events if e.event == "fruit_selected"]
+    assert why.endswith("; the dish 2 cm lower (a branch seen over its rim)") == (lower_m > 0)
     for phase, rule in (("harvest", harvest_pose), ("approach", pre_pose)):
         m.phase = phase
         goal = m.goal()
