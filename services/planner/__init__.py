@@ -146,6 +146,13 @@ class Settings(ServiceSettings):
         "tools' way (the dish's rim met branches passing 5-7 cm behind and under the fruit it "
         "waited under, orchard seed 0); 0: off, m.",
     )
+    branch_check_recall: bool = Field(
+        default=False,
+        description="… a sphere listed again in (or next to) a cell where one counted before "
+        "counts at once, not after branch_check_min_age_s (a branch the arms hid and the "
+        "camera sees again is not new; orchard seed 0: a branch counted at the start was young "
+        "again when the fruit in front of it was checked, and the dish met it).",
+    )
     branch_check_recheck_s: float = Field(
         default=3.0,
         ge=0,

@@ -89,10 +89,17 @@ class BranchCheck:
     min_age_s: a sphere counts once listed this long (sim time), s.
     cell_m: spheres are told apart by the cell of this size their centre lies in (the scene's
         voxel: a sphere is the mean of its voxel's points, so it stays in its cell), m.
+    recall: a sphere listed again in (or next to) a cell where one has counted before counts
+        at once: a branch the arms hid, seen again, is not new.
     """
 
     def __init__(
-        self, depth_m: float, own_branch_m: float, min_age_s: float = 2.0, cell_m: float = 0.04
+        self,
+        depth_m: float,
+        own_branch_m: float,
+        min_age_s: float = 2.0,
+        cell_m: float = 0.04,
+        recall: bool = False,
     ) -> None:
         self.depth_m = depth_m
         self.own_branch_m = own_branch_m
@@ -105,11 +112,16 @@ class BranchCheck:
         self.young = 0  # spheres of the latest state not old enough to count
         self.first_listed_ns: dict[tuple[int, int, int], int] = {}
         self.start_ns: int | None = None
+        self.recall = recall
+        self.counted_cells: set[tuple[int, int, int]] = set()  # every cell that ever counted
 
     def set_scene(self, scene: SceneState) -> None:
         """The occupied space of this scene state that counts: its obstacles' spheres and those
         the keep-out leaves out (no trunk, no fruit: those are other checks), listed since the
-        start or for ``min_age_s``. A sphere no longer listed starts again when it comes back."""
+        start or for ``min_age_s``. A sphere no longer listed starts again when it comes back
+        (with ``recall``: unless a sphere in its cell, or in one next to it, counted before:
+        orchard seed 0, a branch 7 cm behind a fruit, counted at the start, hidden by the arms
+        and listed again, was 1.5 s young when that fruit was checked, and the dish met it)."""
         now = scene.header.stamp_ns
         if self.start_ns is None:
             self.start_ns = now
@@ -121,12 +133,23 @@ class BranchCheck:
         first = {k: self.first_listed_ns.get(k, now) for k in keys}
         self.first_listed_ns = first
         start_ns = self.start_ns + round(START_S * 1e9)
-        self.spheres = tuple(
-            s
-            for s, k in zip(listed, keys, strict=True)
-            if first[k] <= start_ns or now - first[k] >= self.min_age_ns
-        )
+        counts = {k for k in keys if first[k] <= start_ns or now - first[k] >= self.min_age_ns}
+        if self.recall:
+            self.counted_cells |= counts
+            counts |= {k for k in keys if self._recalled(k)}
+        self.spheres = tuple(s for s, k in zip(listed, keys, strict=True) if k in counts)
         self.young = len(listed) - len(self.spheres)
+
+    def _recalled(self, k: tuple[int, int, int]) -> bool:
+        """A sphere counted before in cell ``k`` or one of its 26 neighbours (a voxel's mean
+        moves across a cell border as the points seen of it change)."""
+        i, j, m = k
+        return any(
+            (i + a, j + b, m + c) in self.counted_cells
+            for a in (-1, 0, 1)
+            for b in (-1, 0, 1)
+            for c in (-1, 0, 1)
+        )
 
     def _cell(self, s: SphereObstacle) -> tuple[int, int, int] | None:
         scaled = np.asarray(s.center_world_m) / self.cell_m

@@ -57,7 +57,10 @@ class PlannerCore:
             from services.planner.branchcheck import BranchCheck
 
             self.machine.branches = BranchCheck(
-                s.branch_check_depth_m, s.branch_check_own_branch_m, s.branch_check_min_age_s
+                s.branch_check_depth_m,
+                s.branch_check_own_branch_m,
+                s.branch_check_min_age_s,
+                recall=s.branch_check_recall,
             )
         if s.crowd_first:
             from services.planner.crowd import CrowdCheck

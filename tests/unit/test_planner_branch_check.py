@@ -344,3 +344,30 @@ def test_the_dish_is_not_lowered_into_a_neighbour() -> None:
     lowering(core, 0.02)
     core.machine.branches.set_scene(scene(rim_branch(core, 0.015)))
     assert select(core) == 1 and core.book.records[1].dish_lower_m == 0.0
+
+
+@pytest.mark.parametrize("recall", [False, True])
+def test_a_branch_seen_again_counts_at_once_with_recall(recall: bool) -> None:
+    """A branch where the dish goes, seen from the start, leaves the list (an arm hid it) and
+    comes back. Without ``recall`` it is young again for 2 s and the fruit is taken; with it,
+    it counts at once (also 4 cm over, its mean in the next cell), and the fruit waits. A
+    sphere never counted before is still young with ``recall``."""
+    core = checking()
+    check = core.machine.branches
+    assert check is not None
+    check.recall = recall
+    spheres = branch(dish_level(core))
+    check.set_scene(scene(spheres, at_s=0.0))
+    assert check.young == 0
+    check.set_scene(scene((), at_s=5.0))
+    up = np.array([0.0, 0.0, 0.04])  # a whole cell up: the next cell
+    moved = tuple(
+        s.model_copy(update={"center_world_m": tuple(np.asarray(s.center_world_m) + up)})
+        for s in spheres
+    )
+    check.set_scene(scene(moved, at_s=5.1))
+    assert check.young == (0 if recall else len(spheres))
+    assert select(core, 5.1) == (3 if recall else 1)
+    elsewhere = branch(dish_level(core) + np.array([0.0, 0.0, 0.3]), "far")
+    check.set_scene(scene(moved + elsewhere, at_s=5.2))
+    assert check.young == len(elsewhere) + (0 if recall else len(spheres))
