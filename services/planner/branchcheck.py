@@ -120,8 +120,8 @@ class BranchCheck:
         the keep-out leaves out (no trunk, no fruit: those are other checks), listed since the
         start or for ``min_age_s``. A sphere no longer listed starts again when it comes back
         (with ``recall``: unless a sphere in its cell, or in one next to it, counted before:
-        orchard seed 0, a branch 7 cm behind a fruit, counted at the start, hidden by the arms
-        and listed again, was 1.5 s young when that fruit was checked, and the dish met it)."""
+        orchard seed 0, a branch 7 cm behind a fruit, counted at the start, left the list and
+        came back, and was young again when that fruit was checked; the dish met it)."""
         now = scene.header.stamp_ns
         if self.start_ns is None:
             self.start_ns = now
