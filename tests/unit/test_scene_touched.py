@@ -126,8 +126,12 @@ def test_on_by_default_and_the_sim_fills_the_joint_state() -> None:
         try:
             ph = sim.physics
             branch = next(b for b, n in ph.names.items() if n.startswith("branch_"))
-            fake = {("cutter_tool", branch): (0.6, 0.1, 1.2), ("basket", ph.ground): (0, 0, 0)}
-            ph.robot_contact_points = lambda fake=fake: fake  # type: ignore[method-assign]
+            on_link, on_branch = (0.6, 0.1, 1.2), (0.6, 0.1, 1.21)
+            fake = {
+                ("cutter_tool", branch): (on_link, on_branch),
+                ("basket", ph.ground): ((0, 0, 0), (0, 0, 0)),
+            }
+            ph.robot_contact_pairs = lambda fake=fake: fake  # type: ignore[method-assign]
             sim._count_contacts()
             js = sim.joint_state(0)
         finally:
