@@ -41,6 +41,7 @@ is what is allowed.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -183,17 +184,9 @@ class BranchCheck:
     ) -> BranchVerdict:
         """The verdict on ``fruit`` (track IDs ``fruit_ids``) whose tool poses are ``poses``
         ((name, pose), in order)."""
-        spheres = self.in_the_way(fruit, fruit_ids)
-        if not spheres:
-            return BranchVerdict(True)
-        self.space.set_obstacles(Obstacles(spheres=spheres))
-        for name, pose in poses:
-            sols = kin.solutions(pose)
-            if not sols:
-                continue  # out of reach: the IK check says so
-            depth, sphere = min(self._deepest(s.q_rad, spheres) for s in sols)
+        for name, depth, solutions, sphere in self._clearest(kin, fruit, poses, fruit_ids):
             if depth > self.depth_m:
-                return BranchVerdict(False, name, depth, len(sols), sphere)
+                return BranchVerdict(False, name, depth, solutions, sphere)
         return BranchVerdict(True)
 
     def poses_depth_m(
@@ -206,16 +199,30 @@ class BranchCheck:
         """How deep the clearest IK solution's tools go into the spheres at the deepest of
         ``poses`` (0: clear of them; poses out of reach are not measured), m: what ``check``
         compares with ``depth_m``."""
+        return max(
+            (d for _n, d, _k, _s in self._clearest(kin, fruit, poses, fruit_ids)), default=0.0
+        )
+
+    def _clearest(
+        self,
+        kin: Kinematics,
+        fruit: FruitShape,
+        poses: list[tuple[str, ToolPoses]],
+        fruit_ids: frozenset[int],
+    ) -> Iterator[tuple[str, float, int, str]]:
+        """Per pose in reach, in order: its name, how deep the tools of its clearest IK
+        solution go into the spheres in the way (m), how many solutions, and the sphere they go
+        deepest into. Nothing when no sphere is in the way."""
         spheres = self.in_the_way(fruit, fruit_ids)
         if not spheres:
-            return 0.0
+            return
         self.space.set_obstacles(Obstacles(spheres=spheres))
-        depths = [0.0]
-        for _name, pose in poses:
+        for name, pose in poses:
             sols = kin.solutions(pose)
-            if sols:
-                depths.append(min(self._deepest(s.q_rad, spheres)[0] for s in sols))
-        return max(depths)
+            if not sols:
+                continue  # out of reach: the IK check says so
+            depth, sphere = min(self._deepest(s.q_rad, spheres) for s in sols)
+            yield name, depth, len(sols), sphere
 
     def tool_depth_m(self, q_rad: np.ndarray) -> float:
         """How deep the deepest tool body goes into the spheres at ``q_rad`` (0: clear), m."""
