@@ -755,13 +755,9 @@ class Machine:
         if self.crowd is None:
             return None
         present = self._on_tree(rec)
-        settings = self._settings_for(rec)
         crowding = self.crowd.crowders(
             self.kin,
-            [
-                ("harvest pose", harvest_pose(rec.planned, settings, rec.dish_back_m)),
-                ("pre-pose", pre_pose(rec.planned, settings, rec.dish_back_m)),
-            ],
+            self._poses(rec, self._settings_for(rec), rec.dish_back_m),
             [r.planned for r in present],
         )
         if crowding is None:
@@ -973,7 +969,7 @@ class Machine:
         ids = frozenset((rec.key, rec.fruit_id))
         verdict = self._rule_or_under(rec, h, p, ids)
         if self.s.branch_check_dish_lower_m > 0.0:
-            verdict = self._dish_lower(rec, h, p, ids, verdict)
+            verdict = self._dish_lower(rec, h, ids, verdict)
         return verdict
 
     def _rule_or_under(
@@ -1002,7 +998,6 @@ class Machine:
         self,
         rec: FruitRecord,
         h: ToolPoses,
-        p: ToolPoses,
         ids: frozenset[int],
         verdict: BranchVerdict,
     ) -> BranchVerdict:
@@ -1023,9 +1018,10 @@ class Machine:
                 if h.basket_back_m == 0.0 or not self.s.branch_check_dish_under
                 else [None, 0.0]
             )
-        chosen = [self._dish_moved(x, rec.dish_back_m, 0.0) for x in (h, p)]
         depth_m = (
-            self.branches.poses_depth_m(self.kin, rec.planned, self._named(chosen), ids)
+            self.branches.poses_depth_m(
+                self.kin, rec.planned, self._poses(rec, self.pose_settings, rec.dish_back_m), ids
+            )
             if verdict.clear
             else np.inf
         )
@@ -1036,25 +1032,25 @@ class Machine:
         if any(r.key not in before for r in self._blockers(rec, settings)):
             return verdict  # a lower dish goes into a neighbour: not lower
         for back in backs:
-            low = [self._dish_moved(x, back, lower) for x in (h, p)]
-            if not all(self.kin.reach(x).reachable for x in low):
+            low = self._poses(rec, settings, back)
+            if not all(self.kin.reach(x).reachable for _, x in low):
                 continue
-            d = self.branches.poses_depth_m(self.kin, rec.planned, self._named(low), ids)
+            d = self.branches.poses_depth_m(self.kin, rec.planned, low, ids)
             if d <= self.branches.depth_m and d <= depth_m - DISH_LOWER_GAIN_M:
                 rec.dish_back_m, rec.dish_lower_m = back, lower
                 return BranchVerdict(True)
         return verdict
 
     @staticmethod
-    def _named(poses: list[ToolPoses]) -> list[tuple[str, ToolPoses]]:
-        return [("harvest pose", poses[0]), ("pre-pose", poses[1])]
-
-    @staticmethod
-    def _dish_moved(x: ToolPoses, back_m: float | None, lower_m: float) -> ToolPoses:
-        """``x`` (the rule's) with the dish ``back_m`` back (None: the rule's) and ``lower_m``
-        lower."""
-        back = x.basket_back_m if back_m is None else back_m
-        return replace(x, basket_back_m=back, basket_below_m=x.basket_below_m + lower_m)
+    def _poses(
+        rec: FruitRecord, settings: PoseSettings, back_m: float | None
+    ) -> list[tuple[str, ToolPoses]]:
+        """``rec``'s harvest pose and pre-pose with ``settings``, the dish ``back_m`` back
+        (None: the rule's), named as the branch check names them."""
+        return [
+            ("harvest pose", harvest_pose(rec.planned, settings, back_m)),
+            ("pre-pose", pre_pose(rec.planned, settings, back_m)),
+        ]
 
     def _lowered(self, lower_m: float) -> PoseSettings:
         """The pose settings with the dish ``lower_m`` lower than the rule's."""
