@@ -136,7 +136,7 @@ class Settings(ServiceSettings):
         "(the IK measures the dish where it is sent; the back place is the rule, not a need).",
     )
     branch_check_dish_lower_m: float = Field(
-        default=0.0,
+        default=0.02,
         ge=0,
         le=0.06,
         description="… when a tool of the chosen poses lies in the occupied spheres (within "
@@ -144,10 +144,10 @@ class Settings(ServiceSettings):
         "further under the fruit; the fruit falls that much farther) and take those if their "
         "tools go at least 5 mm less deep, the IK reaches them, and no fruit comes into the "
         "tools' way (the dish's rim met branches passing 5-7 cm behind and under the fruit it "
-        "waited under, orchard seed 0); 0: off, m.",
+        "waited under, orchard seed 0; 20 orchard seeds: BENCHMARKS.md, session 48); 0: off, m.",
     )
     branch_check_recall: bool = Field(
-        default=False,
+        default=True,
         description="… a sphere listed again in (or next to) a cell where one counted before "
         "counts at once, not after branch_check_min_age_s (a branch the arms hid and the "
         "camera sees again is not new; orchard seed 0: a branch counted at the start was young "

@@ -47,7 +47,11 @@ def scene(
 def checking(*, on: bool = True, order: str = "nearest", own_branch_m: float = 0.1) -> PlannerCore:
     core = core_with(order, fruit(1, A, 0.5), fruit(3, C, 0.7))
     core.s = core.machine.s = core.s.model_copy(update={"branch_check": on})
-    core.machine.branches = BranchCheck(core.s.branch_check_depth_m, own_branch_m) if on else None
+    core.machine.branches = (
+        BranchCheck(core.s.branch_check_depth_m, own_branch_m, recall=core.s.branch_check_recall)
+        if on
+        else None
+    )
     return core
 
 
@@ -222,7 +226,8 @@ def test_the_core_builds_the_check_and_gives_it_every_scene_state() -> None:
 def test_what_came_after_the_start_counts_once_it_stayed() -> None:
     """A hand passing under the fruit from 4 s on is occupied space while it is seen: the check
     does not refuse the fruit for it; what is still listed 2 s later does count, and a sphere
-    that left the list starts its age again."""
+    that left the list starts its age again (with ``branch_check_recall``, on by default, one
+    back in a cell where a sphere counted before counts at once)."""
     core = checking()
     check = core.machine.branches
     assert check is not None
@@ -234,6 +239,10 @@ def test_what_came_after_the_start_counts_once_it_stayed() -> None:
     assert check.young == 0 and select(core) == 3  # it stayed: fruit 1 waits
     check.set_scene(scene((), at_s=6.2))
     check.set_scene(scene(hand, at_s=6.3))
+    assert check.recall and check.young == 0  # back where it counted: counts at once
+    check.recall = False
+    check.set_scene(scene((), at_s=6.4))
+    check.set_scene(scene(hand, at_s=6.5))
     assert check.young == len(hand)
 
 
@@ -242,10 +251,12 @@ def test_a_branch_behind_the_dish_sends_it_right_under_the_fruit(dish_under: boo
     """The pose rule sets the dish 1.5 cm back towards the robot (dish_back_m, cut by the catch
     margin). A branch just behind that place refuses those poses; with the dish right under the
     tip they are clear, so the fruit is taken with the dish there, and the controller is sent
-    that place (``branch_check_dish_under``; off: deferred, as before session 40)."""
+    that place (``branch_check_dish_under``; off: deferred, as before session 40). The dish
+    stays at the rule's height (``branch_check_dish_lower_m`` off): that is the next test's."""
     core = checking()
     m = core.machine
-    m.s = core.s = core.s.model_copy(update={"branch_check_dish_under": dish_under})
+    update = {"branch_check_dish_under": dish_under, "branch_check_dish_lower_m": 0.0}
+    m.s = core.s = core.s.model_copy(update=update)
     assert m.branches is not None
     rec = core.book.records[1]
     assert harvest_pose(rec.planned, m.pose_settings).basket_back_m > 0.01
@@ -351,8 +362,10 @@ def test_a_branch_seen_again_counts_at_once_with_recall(recall: bool) -> None:
     """A branch where the dish goes, seen from the start, leaves the list (an arm hid it) and
     comes back. Without ``recall`` it is young again for 2 s and the fruit is taken; with it,
     it counts at once (also 4 cm over, its mean in the next cell), and the fruit waits. A
-    sphere never counted before is still young with ``recall``."""
+    sphere never counted before is still young with ``recall``. The dish is not lowered
+    (``branch_check_dish_lower_m`` off): under this branch the lower dish would be clear."""
     core = checking()
+    lowering(core, 0.0)
     check = core.machine.branches
     assert check is not None
     check.recall = recall
