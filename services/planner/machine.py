@@ -938,7 +938,7 @@ class Machine:
             if self.branches is None:
                 rec.dish_back_m, rec.dish_lower_m = None, 0.0
                 return True
-            verdict = self._branch_verdict(rec, h, p)
+            verdict = self._branch_verdict(rec, h.basket_back_m)
             if verdict.clear:
                 return True
             if rec.branch_refused_ns is None:
@@ -959,36 +959,35 @@ class Machine:
         rec.finished_ns = now  # never attempted
         return False
 
-    def _branch_verdict(self, rec: FruitRecord, h: ToolPoses, p: ToolPoses) -> BranchVerdict:
-        """The branch check of the pose rule's poses ``h``, ``p``; when it refuses them and the
-        rule set the dish back, of the dish right under the tip too (``branch_check_dish_under``),
-        whose poses the controller is then sent (``rec.dish_back_m``). The rule's verdict names
-        a refusal."""
+    def _branch_verdict(self, rec: FruitRecord, rule_back_m: float) -> BranchVerdict:
+        """The branch check of the pose rule's poses (the dish ``rule_back_m`` back); when it
+        refuses them and the rule set the dish back, of the dish right under the tip too
+        (``branch_check_dish_under``), whose poses the controller is then sent
+        (``rec.dish_back_m``); then the dish lower (``_dish_lower``). The rule's verdict names a
+        refusal."""
         assert self.branches is not None
         rec.dish_back_m, rec.dish_lower_m = None, 0.0
         ids = frozenset((rec.key, rec.fruit_id))
-        verdict = self._rule_or_under(rec, h, p, ids)
+        verdict = self._rule_or_under(rec, rule_back_m, ids)
         if self.s.branch_check_dish_lower_m > 0.0:
-            verdict = self._dish_lower(rec, h, ids, verdict)
+            verdict = self._dish_lower(rec, rule_back_m, ids, verdict)
         return verdict
 
     def _rule_or_under(
-        self, rec: FruitRecord, h: ToolPoses, p: ToolPoses, ids: frozenset[int]
+        self, rec: FruitRecord, rule_back_m: float, ids: frozenset[int]
     ) -> BranchVerdict:
-        """The rule's verdict, or the dish right under the tip's where that one is clear and
-        the rule's is not (``rec.dish_back_m`` 0)."""
+        """The rule's verdict (its dish ``rule_back_m`` back), or the dish right under the
+        tip's where that one is clear and the rule's is not (``rec.dish_back_m`` 0)."""
         assert self.branches is not None
         verdict = self.branches.check(
-            self.kin, rec.planned, [("harvest pose", h), ("pre-pose", p)], ids
+            self.kin, rec.planned, self._poses(rec, self.pose_settings, None), ids
         )
-        if verdict.clear or h.basket_back_m == 0.0 or not self.s.branch_check_dish_under:
+        if verdict.clear or rule_back_m == 0.0 or not self.s.branch_check_dish_under:
             return verdict
-        under = [replace(x, basket_back_m=0.0) for x in (h, p)]
-        if not all(self.kin.reach(x).reachable for x in under):
+        under = self._poses(rec, self.pose_settings, 0.0)
+        if not all(self.kin.reach(x).reachable for _, x in under):
             return verdict
-        alt = self.branches.check(
-            self.kin, rec.planned, [("harvest pose", under[0]), ("pre-pose", under[1])], ids
-        )
+        alt = self.branches.check(self.kin, rec.planned, under, ids)
         if not alt.clear:
             return verdict
         rec.dish_back_m = 0.0
@@ -997,7 +996,7 @@ class Machine:
     def _dish_lower(
         self,
         rec: FruitRecord,
-        h: ToolPoses,
+        rule_back_m: float,
         ids: frozenset[int],
         verdict: BranchVerdict,
     ) -> BranchVerdict:
@@ -1014,9 +1013,7 @@ class Machine:
             backs: list[float | None] = [rec.dish_back_m]
         else:
             backs = (
-                [None]
-                if h.basket_back_m == 0.0 or not self.s.branch_check_dish_under
-                else [None, 0.0]
+                [None] if rule_back_m == 0.0 or not self.s.branch_check_dish_under else [None, 0.0]
             )
         depth_m = (
             self.branches.poses_depth_m(
