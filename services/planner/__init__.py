@@ -259,15 +259,6 @@ class Settings(ServiceSettings):
         "spheres, m: above the controller's damper safety distances (trunk 3 cm), or the "
         "dampers stop the arms on the path.",
     )
-    plan_margin_fallback_m: float = Field(
-        default=0.0,
-        ge=0,
-        le=0.1,
-        description="A plan that finds no path at plan_margin_m searches once more at this "
-        "smaller margin (the same budget) before it gives up, m: in the crown the arms stall "
-        "among branches where no path keeps 4.5 cm. Keep it above the controller's branch d_s "
-        "(1.5 cm). 0: off.",
-    )
     plan_limit_margin_rad: float = Field(
         default=0.1,
         ge=0,
@@ -490,15 +481,6 @@ class Settings(ServiceSettings):
             raise ValueError(
                 f"harvest_tolerance_m {self.harvest_tolerance_m} exceeds approach_tolerance_m "
                 f"{self.approach_tolerance_m}"
-            )
-        return self
-
-    @model_validator(mode="after")
-    def _fallback_below_margin(self) -> Settings:
-        if self.plan_margin_fallback_m >= self.plan_margin_m:
-            raise ValueError(
-                f"plan_margin_fallback_m {self.plan_margin_fallback_m} is not below "
-                f"plan_margin_m {self.plan_margin_m} (0 turns the fallback off)"
             )
         return self
 

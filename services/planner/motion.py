@@ -16,7 +16,7 @@ import numpy as np
 
 from schemas.scene import CylinderObstacle, Obstacles, Trunk
 from services.planner import Settings
-from services.planner.freespace import Clearance, FreeSpace, validity
+from services.planner.freespace import FreeSpace, validity
 from services.planner.goalclear import GoalClearer
 from services.planner.kinematics import IkSolution
 from services.planner.poses import FruitShape, ToolPoses
@@ -72,48 +72,19 @@ class ApproachPlanner:
                 ignore_fruit_ids,
             )
         goal, moved = self._goal(goals, pose)
-        res, c0, c1 = self._search(start, goal, s.plan_margin_m, seed)
-        if c1.obstacles_m < -s.plan_goal_max_depth_m and c1.nearest != "fruit":
-            why = f"the goal is {-c1.obstacles_m * 1e3:.0f} mm inside a {c1.nearest}{moved}"
-            return ApproachPlan(None, f"no planned path ({why}): pose goals")
-        ends = f"clearance {c0.describe()} at the start, {c1.describe()} at the end{moved}"
-        fallback = s.plan_margin_fallback_m
-        if res is not None and res.path is None and fallback > 0:
-            # the crown leaves no way at the full margin: once more, closer to the spheres
-            first = res
-            res, _, _ = self._search(start, goal, fallback, seed)
-            ends += (
-                f"; none at the {s.plan_margin_m * 1e3:.0f} mm margin ({first.why}), "
-                f"searched at {fallback * 1e3:.0f} mm"
-            )
-        assert res is not None
-        if res.path is None:
-            return ApproachPlan(None, f"no planned path ({res.why}; {ends}): pose goals")
-        self.found += 1
-        return ApproachPlan(
-            res.path,
-            f"planned joint path {res.length_rad:.2f} rad, {res.checks} checks ({ends})",
-        )
-
-    def _search(
-        self, start: np.ndarray, goal: np.ndarray, margin_m: float, seed: int
-    ) -> tuple[PlanResult | None, Clearance, Clearance]:
-        """RRT-Connect from ``start`` to ``goal`` keeping ``margin_m`` (the ends' clearances
-        with it); no search (None) when the goal lies deeper in a branch or the trunk than
-        ``plan_goal_max_depth_m`` (the caller refuses it)."""
-        s = self.s
         valid, c0, c1 = validity(
             self.space,
             start,
             goal,
-            margin_m,
+            s.plan_margin_m,
             s.plan_self_margin_m,
             s.plan_escape_rad,
             s.plan_limit_margin_rad,
         )
         if c1.obstacles_m < -s.plan_goal_max_depth_m and c1.nearest != "fruit":
-            return None, c0, c1
-        res = rrt_connect(
+            why = f"the goal is {-c1.obstacles_m * 1e3:.0f} mm inside a {c1.nearest}{moved}"
+            return ApproachPlan(None, f"no planned path ({why}): pose goals")
+        res: PlanResult = rrt_connect(
             start,
             goal,
             valid,  # type: ignore[arg-type]
@@ -122,7 +93,14 @@ class ApproachPlanner:
             np.random.default_rng(seed),
             max_checks=s.plan_max_checks,
         )
-        return res, c0, c1
+        ends = f"clearance {c0.describe()} at the start, {c1.describe()} at the end{moved}"
+        if res.path is None:
+            return ApproachPlan(None, f"no planned path ({res.why}; {ends}): pose goals")
+        self.found += 1
+        return ApproachPlan(
+            res.path,
+            f"planned joint path {res.length_rad:.2f} rad, {res.checks} checks ({ends})",
+        )
 
     def _goal(self, goals: list[IkSolution], pose: ToolPoses | None) -> tuple[np.ndarray, str]:
         """The clearest goal, and what the reason adds when it was moved clear. Goals closer
