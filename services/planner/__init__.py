@@ -271,6 +271,12 @@ class Settings(ServiceSettings):
         description="A planned path the arms cannot follow (stuck, timed out) is planned again "
         "from where they are, this many times per attempt; then the pose goals.",
     )
+    plan_from_attempt_start: bool = Field(
+        default=False,
+        description="A plan that finds no path from where the arms are (stalled among "
+        "branches, a link at the dampers' d_s) plans from where the attempt began instead, and "
+        "the arms first go back along the joints they came in by (free: they came that way).",
+    )
     plan_self_margin_m: float = Field(
         default=0.005, ge=0, le=0.1, description="… and its bodies this far apart, m."
     )

@@ -44,8 +44,8 @@ from services.planner.book import FruitBook, FruitRecord
 from services.planner.branchcheck import BranchCheck, BranchVerdict
 from services.planner.clutter import clearable, intrusions_m, same_fruit
 from services.planner.crowd import CrowdCheck, Crowding
-from services.planner.kinematics import Kinematics
-from services.planner.motion import ApproachPlanner
+from services.planner.kinematics import IkSolution, Kinematics
+from services.planner.motion import ApproachPlan, ApproachPlanner
 from services.planner.order import nearest_first, planned_order
 from services.planner.poses import (
     FruitShape,
@@ -338,6 +338,8 @@ class Machine:
             return None
         seed = rec.fruit_id * 1000 + self.motion.plans
         plan = self.motion.plan(self.q_rad, goals, rec.planned, seed, p, self._ignore(None))
+        if plan.path is None and self.s.plan_from_attempt_start and len(self.path.points) >= 2:
+            plan = self._plan_from_attempt_start(rec, goals, seed, p, plan)
         self.left_because = plan.why
         if plan.path is None:
             return None
@@ -353,6 +355,20 @@ class Machine:
         )
         follow.update(self.q_rad, now)  # the first goal ahead of the arms, not where they are
         return follow
+
+    def _plan_from_attempt_start(
+        self, rec: FruitRecord, goals: list[IkSolution], seed: int, p: ToolPoses, here: ApproachPlan
+    ) -> ApproachPlan:
+        """No path from where the arms are (``here``): one from where the attempt began, after
+        the way back along the joints the arms came in by (free: they came that way)."""
+        assert self.motion is not None
+        start = self.path.points[0]
+        again = self.motion.plan(start, goals, rec.planned, seed, p, self._ignore(None))
+        if again.path is None:
+            return ApproachPlan(None, f"{here.why}; from where the attempt began: {again.why}")
+        back = [q.copy() for q in reversed(self.path.points)]
+        why = f"{again.why}, from where the attempt began, back along {len(back)} waypoints first"
+        return ApproachPlan(back + again.path[1:], why)
 
     def _harvest(self, now: int, st: ControlStatus, basket: int | None) -> None:
         rec = self.target

@@ -274,3 +274,45 @@ def test_no_path_to_a_goal_in_a_branch_but_one_in_a_fruit_is_planned_for() -> No
     off = ApproachPlanner(s.model_copy(update={"plan_max_checks": 50, "plan_goal_max_depth_m": 1}))
     got = off.plan(HOME, [elbow_in_a_branch(core, off)], rec.planned, 1, pose)
     assert "-30 mm (branch) at the end" in got.why
+
+
+def stalled_away_from_the_way(from_start: bool) -> tuple[PlannerCore, np.ndarray, np.ndarray]:
+    """The attempt began at the ready pose and the arms came to a stall 1.2 rad round on the
+    cutter's first joint, where a branch sphere sits on the straight way on to the pre-pose;
+    the way from the ready pose is clear. 40 checks find no way round it from the stall."""
+    core = planned_core()
+    m = core.machine
+    m.s = m.s.model_copy(update={"plan_max_checks": 40, "plan_from_attempt_start": from_start})
+    m.motion = ApproachPlanner(m.s)
+    goal = pre_pose_joints(core)
+    stuck = HOME.copy()
+    stuck[0] += 1.2
+    space = m.motion.space
+    space.robot.set_q(stuck + 0.5 * (goal - stuck))
+    tip = space.robot.T_world(TOOL_FRAME["cutter"])[:3, 3]
+    m.motion.obstacles = Obstacles(
+        spheres=(SphereObstacle(name="occupied_1", center_world_m=tuple(tip), radius_m=0.03),)
+    )
+    m.path.start(HOME)
+    for k in range(1, 25):  # the joints the arms came in by
+        m.path.note(HOME + (stuck - HOME) * k / 24)
+    m.q_rad = stuck
+    return core, stuck, goal
+
+
+def test_no_path_from_a_stall_is_planned_from_where_the_attempt_began() -> None:
+    core, stuck, goal = stalled_away_from_the_way(from_start=False)
+    m, rec = core.machine, core.book.records[1]
+    assert m._planned_approach(rec) is None and "no planned path" in m.left_because
+
+    core, stuck, goal = stalled_away_from_the_way(from_start=True)
+    m, rec = core.machine, core.book.records[1]
+    follow = m._planned_approach(rec)
+    assert follow is not None, m.left_because
+    assert "from where the attempt began, back along" in m.left_because
+    assert m.left_because.startswith("planned joint path")  # counted once by the bench
+    way = follow.waypoints
+    assert np.allclose(way[0], stuck) and np.allclose(way[-1], goal)
+    back = len(m.path.points)
+    assert all(np.allclose(a, b) for a, b in zip(way[:back], reversed(m.path.points), strict=True))
+    assert all(m.motion.space.clearance(q).obstacles_m >= 0.045 for q in way[back:])
