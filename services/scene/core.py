@@ -54,6 +54,9 @@ TARGET_ENDS = (*HARVESTED_EVENTS, "fruit_skipped", "fruit_lost")
 # Unseen-fruit voxels centred this near the robot's capsules are the robot (fruit-coloured
 # arms and dish; the centres measured 0-5 mm off the capsules, orchard seed 13): forgotten.
 UNSEEN_FORGET_IN_ROBOT_M = 0.01
+# a near sphere this close to one shown in the last state is that one (a felt place's centre
+# drifts by 1-2 mm as points are added; two voxels' centres are a voxel apart, 2-3 cm)
+NEAR_SAME_M = 0.01
 JOINT_BUFFER = 256  # joint states kept (120 Hz: ~2 s, the frame buffer's span at 15 Hz and more)
 
 
@@ -145,6 +148,8 @@ class SceneCore:
             else None
         )
         self.target: int | None = None  # the planner's current fruit (harvest/events)
+        # the near spheres shown in the last state: for which selected fruit, their centres
+        self.near_shown: tuple[int | None, np.ndarray] = (None, np.empty((0, 3)))
         self.cut_entry: Entry | None = None  # the target as it hung when the cut was sent
         self.body = RobotBody() if s.robot_self_filter else None
         self.joints: OrderedDict[int, JointState] = OrderedDict()  # stamp → joint state
@@ -586,16 +591,26 @@ class SceneCore:
         that radius. The branch check keeps ``near`` whole, at full radius."""
         r = self.s.occupancy_near_radius_m
         if r <= 0 or selected is None:
+            self.near_shown = (None, np.empty((0, 3)))
             return ()
         inner = self._inner_space(selected)
         inner_m = inner[0][2]
+        hold_m = self.s.occupancy_near_hold_m
+        shown_id, before = self.near_shown
+        if shown_id != selected.fruit_id:
+            before = np.empty((0, 3))
+        shown: list[SphereObstacle] = []
         # the occupancy grid's own keep-out test (a sphere's surface within the capsule), on
-        # the spheres already found near rather than a second pass over the whole grid
-        return tuple(
-            sp.model_copy(update={"radius_m": r})
-            for sp in near
-            if axis_distances_m(np.array(sp.center_world_m), inner)[0] >= inner_m + sp.radius_m
-        )
+        # the spheres already found near rather than a second pass over the whole grid; one
+        # shown last time only leaves once hold_m inside (the edge moves with the estimate)
+        for sp in near:
+            c = np.array(sp.center_world_m)
+            outside_m = axis_distances_m(c, inner)[0] - inner_m - sp.radius_m
+            if outside_m >= 0 or (outside_m >= -hold_m and _among(c, before, NEAR_SAME_M)):
+                shown.append(sp.model_copy(update={"radius_m": r}))
+        centres = np.array([sp.center_world_m for sp in shown], float).reshape(-1, 3)
+        self.near_shown = (selected.fruit_id, centres)
+        return tuple(shown)
 
     def _to_cam(self, p_world: np.ndarray) -> np.ndarray:
         assert self.T is not None  # an entry or a trunk exists only after a frame was used
@@ -638,3 +653,8 @@ def _failure_flag(f: EstimateFailure) -> FruitFlag:
     if f.reason == "depth_inconsistent":
         return "depth_inconsistent"
     return "box_invalid"
+
+
+def _among(c: np.ndarray, centres: np.ndarray, within_m: float) -> bool:
+    """``c`` lies within ``within_m`` of one of ``centres`` (N, 3)."""
+    return bool(len(centres)) and float(np.min(np.linalg.norm(centres - c, axis=1))) <= within_m
