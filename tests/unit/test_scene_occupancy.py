@@ -9,10 +9,12 @@ import dataclasses
 import numpy as np
 import pytest
 
+from schemas.scene import SphereObstacle
 from services.robot.clearance import axis_distances_m
 from services.runtime.settings import load_settings
 from services.scene import Settings, occupancy
 from services.scene.core import SceneCore
+from services.scene.fruit_list import Entry, Measurement
 from services.scene.geometry import RigidTransform
 from services.scene.occupancy import OccupancyGrid, OccupancyParams
 from tests.scene_helpers import BARK, LEAF, LEVEL_POSE, R_WORLD_CAM, T_WORLD_CAM_M, K, Scene, tracks
@@ -397,6 +399,41 @@ def test_near_spheres_reach_the_controller_small_outside_the_inner_working_space
     assert min(d) >= reach - 1e-9
     # the fruit's own twig: the strip above it is left out with the twig, shown without it
     assert len([s for s in no_twig.obstacles.spheres if s.radius_m == 0.01]) > len(small)
+
+
+def selected_at(fruit_id: int, centre_m: np.ndarray, d_v_m: float = 0.04) -> Entry:
+    m = Measurement(np.zeros(3), centre_m, 0.04, d_v_m)
+    return Entry(fruit_id, m, 0, 0)
+
+
+def test_a_near_sphere_shown_stays_shown_while_the_inner_spaces_edge_moves() -> None:
+    """Orchard seed 19: a felt branch at the inner working space's edge was shown and hidden on
+    alternate states as the fruit's estimate moved a few mm, and the dish struck it 12 times."""
+    fruit_m = np.array([0.9, -0.19, 1.48])
+    inner_m = 0.04 + Settings().occupancy_inner_clearance_m  # d_v + the inner clearance
+    felt = SphereObstacle(  # its surface 1 mm outside the inner working space
+        name="touched_near_0",
+        center_world_m=tuple(fruit_m + np.array([-(inner_m + 0.035 + 0.001), 0.0, 0.0])),
+        radius_m=0.035,
+    )
+    moved = fruit_m + np.array([-0.004, 0.0, 0.0])  # the next view: 4 mm nearer the sphere
+
+    def shown(core: SceneCore, centre_m: np.ndarray, fruit_id: int = 3) -> list[str]:
+        return [s.name for s in core._near_shown(selected_at(fruit_id, centre_m), (felt,))]
+
+    base = {"robot_self_filter": False, "occupancy_near_radius_m": 0.01}
+    plain = SceneCore(load_settings(Settings, base))
+    assert shown(plain, fruit_m) == ["touched_near_0"]
+    assert shown(plain, moved) == []  # 3 mm inside: hidden, the dish goes back in
+    held = SceneCore(load_settings(Settings, {**base, "occupancy_near_hold_m": 0.01}))
+    assert shown(held, moved) == []  # never shown yet: the hold keeps nothing
+    assert shown(held, fruit_m) == ["touched_near_0"]
+    assert shown(held, moved) == ["touched_near_0"]  # shown before: held
+    deeper = fruit_m + np.array([-0.012, 0.0, 0.0])  # 11 mm inside: past the hold
+    assert shown(held, deeper) == []
+    assert shown(held, moved) == []  # it left: it must come out again to be shown
+    assert shown(held, fruit_m) == ["touched_near_0"]
+    assert shown(held, moved, fruit_id=4) == []  # another fruit selected: nothing held
 
 
 def test_a_near_radius_under_two_millimetres_is_refused_by_name() -> None:
