@@ -390,14 +390,15 @@ class Settings(ServiceSettings):
         "branches seen near the target by their own distance only, m.",
     )
     occupancy_near_hold_m: float = Field(
-        default=0.0,
+        default=0.01,
         ge=0,
         le=0.05,
         description="With occupancy_near_radius_m: a sphere shown to the controller in the last "
         "state for the same selected fruit stays shown until it lies this much inside the inner "
         "working space (the fruit's estimate moves a few mm from view to view, and with it the "
         "space's edge: orchard seed 19, a branch the dish felt at that edge was shown and hidden "
-        "on alternate states and the dish struck it 12 times in 2 s), m. 0: no hold.",
+        "on alternate states and the dish struck it 12 times in 2 s; 10 then: orchard, 20 seeds, "
+        "BENCHMARKS.md, Harvest, session 49), m. 0: no hold.",
     )
     occupancy_inner_clearance_m: float = Field(
         default=0.05,

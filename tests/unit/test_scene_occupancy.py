@@ -422,7 +422,7 @@ def test_a_near_sphere_shown_stays_shown_while_the_inner_spaces_edge_moves() -> 
         return [s.name for s in core._near_shown(selected_at(fruit_id, centre_m), (felt,))]
 
     base = {"robot_self_filter": False, "occupancy_near_radius_m": 0.01}
-    plain = SceneCore(load_settings(Settings, base))
+    plain = SceneCore(load_settings(Settings, {**base, "occupancy_near_hold_m": 0.0}))
     assert shown(plain, fruit_m) == ["touched_near_0"]
     assert shown(plain, moved) == []  # 3 mm inside: hidden, the dish goes back in
     held = SceneCore(load_settings(Settings, {**base, "occupancy_near_hold_m": 0.01}))
