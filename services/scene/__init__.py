@@ -397,8 +397,9 @@ class Settings(ServiceSettings):
         "state for the same selected fruit stays shown until it lies this much inside the inner "
         "working space (the fruit's estimate moves a few mm from view to view, and with it the "
         "space's edge: orchard seed 19, a branch the dish felt at that edge was shown and hidden "
-        "on alternate states and the dish struck it 12 times in 2 s; 10 then: orchard, 20 seeds, "
-        "BENCHMARKS.md, Harvest, session 49), m. 0: no hold.",
+        "on alternate states and the dish struck it 12 times in 2 s, twice with the hold; "
+        "orchard, 20 seeds: 108 collisions against 116, BENCHMARKS.md, Harvest, session 49), "
+        "m. 0: no hold.",
     )
     occupancy_inner_clearance_m: float = Field(
         default=0.05,
