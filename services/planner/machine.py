@@ -366,7 +366,7 @@ class Machine:
         again = self.motion.plan(start, goals, rec.planned, seed, p, self._ignore(None))
         if again.path is None:
             return ApproachPlan(None, f"{here.why}; from where the attempt began: {again.why}")
-        back = [q.copy() for q in reversed(self.path.points)]
+        back = self.path.way_back()
         why = f"{again.why}, from where the attempt began, back along {len(back)} waypoints first"
         return ApproachPlan(back + again.path[1:], why)
 

@@ -37,6 +37,10 @@ class JointPath:
         if self.points and _gap(q, self.points[-1]) >= self.step_rad:
             self.points.append(q.copy())
 
+    def way_back(self) -> list[np.ndarray]:
+        """The waypoints from the last to where the attempt began (copies)."""
+        return [p.copy() for p in reversed(self.points)]
+
 
 @dataclass
 class Retrace:
@@ -61,8 +65,9 @@ class Retrace:
         """None when the path has no waypoint to go back to."""
         if len(path.points) < 2:
             return None
-        pts = [p.copy() for p in reversed(path.points)]
-        return cls(pts, lookahead_rad, tolerance_rad, tolerance_rad / 2, now_ns, best_ns=now_ns)
+        return cls(
+            path.way_back(), lookahead_rad, tolerance_rad, tolerance_rad / 2, now_ns, best_ns=now_ns
+        )
 
     @property
     def goal(self) -> np.ndarray:
