@@ -107,6 +107,24 @@ class Settings(ServiceSettings):
         description="Weight of the acceleration bound's slack (rad⁻²): far above the task "
         "weights (per-step errors of mm), below soft_damper_weight.",
     )
+    limit_margin_rad: float = Field(
+        default=0.0,
+        ge=0,
+        description="A joint closer than this to a position limit is asked (softly, "
+        "limit_weight) to move away at limit_gain_per_s times how far it is inside the margin, "
+        "in both solves: the tasks' free directions (the cutter's turn about the vertical, the "
+        "arms' redundancy) keep an elbow off its stop before the goal needs it there. 0: off "
+        "(no rows at all).",
+    )
+    limit_gain_per_s: float = Field(
+        default=1.0, gt=0, description="Speed away from a limit per rad inside the margin, 1/s."
+    )
+    limit_weight: float = Field(
+        default=1e-2,
+        gt=0,
+        description="Weight of the limit rows' slack (rad⁻²): above the regularisations, far "
+        "below the tasks (per-step errors of mm at weight 1), so it only uses what they leave.",
+    )
     # --- collision avoidance (paper eq. (7)–(8)) -------------------------------------------
     trunk: DamperGroup = Field(
         default=DamperGroup(activation_m=0.15, safety_m=0.03, speed_m_s=0.3),

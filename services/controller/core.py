@@ -98,6 +98,7 @@ class ControllerCore:
             ),
             s.nominal_period_s,
             bound_steps=s.max_joint_acceleration_rad_s2 is not None,
+            limit_weight=s.limit_weight if s.limit_margin_rad > 0 else None,
         )
         self.watchdog = Watchdog(
             s.joint_state_timeout_ms * 1e-3, s.target_timeout_ms * 1e-3, s.nominal_period_s
@@ -295,6 +296,8 @@ class ControllerCore:
         t = time.perf_counter()
         assert self.goals is not None
         self._bound_acceleration(q, dt_s)
+        if self.s.limit_margin_rad > 0:
+            self.hqp.avoid_limits(q, self.s.limit_margin_rad, self.s.limit_gain_per_s * dt_s)
         if self.goals.joints_rad is None:
             res = self.hqp.solve(tick.abs_step, tick.rel_step, rows, dt_s)
         else:

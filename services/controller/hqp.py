@@ -54,11 +54,17 @@ class LexicographicHQP:
     """Two placo KinematicsSolvers on one robot, sharing the damper rows."""
 
     def __init__(
-        self, robot: ControlledRobot, weights: Weights, dt_s: float, bound_steps: bool = False
+        self,
+        robot: ControlledRobot,
+        weights: Weights,
+        dt_s: float,
+        bound_steps: bool = False,
+        limit_weight: float | None = None,
     ) -> None:
         """``bound_steps``: give each solve the soft step bound ``bound_steps()`` sets; off,
         the solves have no such rows at all (inactive soft rows would still add slack
-        variables and change the steps by round-off)."""
+        variables and change the steps by round-off). ``limit_weight``: give solves 1 and 2
+        the soft rows ``avoid_limits()`` sets, with this slack weight; None: no such rows."""
         import placo
 
         self.robot = robot
@@ -85,6 +91,9 @@ class LexicographicHQP:
         self.acc2 = self._step_bound(self.s2, "acceleration2")
         self.hold = self.s2.add_joint_space_half_spaces_constraint(np.zeros((1, nq)), np.ones(1))
         self.hold.configure("hold_absolute", "hard", 1.0)
+        self.limit_weight = limit_weight
+        self.lim1 = self._arm_rows(self.s1, "limits1", limit_weight)
+        self.lim2 = self._arm_rows(self.s2, "limits2", limit_weight)
 
         # A joint goal (retracing a path): one solve, the joints task under the same limits
         # and dampers.
@@ -108,15 +117,31 @@ class LexicographicHQP:
         """Two soft half-spaces per arm joint, ``q + Δq ≤ q + high`` and ``-(q + Δq) ≤
         -(q + low)``: the rows are fixed, ``bound_steps`` sets their right-hand side (inactive
         until then: 1000 rad). None when the steps are not bounded."""
-        if not self.bounded:
+        return self._arm_rows(solver, name, self.w.acceleration if self.bounded else None)
+
+    def _arm_rows(self, solver: Any, name: str, weight: float | None) -> Any:
+        """Two soft half-spaces per arm joint (upper rows, then lower), inactive (1000 rad)
+        until their right-hand side is set; None when ``weight`` is None."""
+        if weight is None:
             return None
         n = len(self.robot.names)
         A = np.zeros((2 * n, self.robot.model.nq))
         A[np.arange(n), self.robot.q_idx] = 1.0
         A[n + np.arange(n), self.robot.q_idx] = -1.0
         c = solver.add_joint_space_half_spaces_constraint(A, np.full(2 * n, 1e3))
-        c.configure(name, "soft", self.w.acceleration)
+        c.configure(name, "soft", weight)
         return c
+
+    def avoid_limits(self, q_rad: np.ndarray, margin_rad: float, gain_step: float) -> None:
+        """Ask each arm joint within ``margin_rad`` of a position limit (``q_rad``, arm order)
+        to step away by at least ``gain_step`` times its depth into the margin (rad), as a
+        soft row in solves 1 and 2; the other joints' rows stay inactive. Only for a solver
+        built with ``limit_weight``."""
+        if self.lim1 is None or self.lim2 is None:
+            raise ValueError("avoid_limits() on an HQP built without limit_weight")
+        b = limit_rows_b(q_rad, self.robot.lower_rad, self.robot.upper_rad, margin_rad, gain_step)
+        for c in (self.lim1, self.lim2):
+            c.b = b
 
     def bound_steps(self, q_rad: np.ndarray, low_rad: np.ndarray, high_rad: np.ndarray) -> None:
         """Keep each arm joint's step from ``q_rad`` (arm order, rad) within [low, high] as a
@@ -200,3 +225,17 @@ class LexicographicHQP:
 
 def _short(exc: Exception) -> str:
     return str(exc).splitlines()[0][:120] if str(exc) else type(exc).__name__
+
+
+def limit_rows_b(
+    q: np.ndarray, lower: np.ndarray, upper: np.ndarray, margin: float, gain_step: float
+) -> np.ndarray:
+    """Right-hand sides of the limit rows ``q + Δq ≤ b_up`` and ``-(q + Δq) ≤ b_low``: a joint
+    ``d`` inside the margin of its upper limit gets ``Δq ≤ -gain_step · d`` (the lower limit
+    alike); 1000 rad (inactive) elsewhere."""
+    far = 1e3
+    up_depth = margin - (upper - q)
+    low_depth = margin - (q - lower)
+    b_up = np.where(up_depth > 0, q - gain_step * up_depth, far)
+    b_low = np.where(low_depth > 0, -(q + gain_step * low_depth), far)
+    return np.concatenate([b_up, b_low])
