@@ -112,18 +112,18 @@ class Settings(ServiceSettings):
         ge=0,
         description="A joint closer than this to a position limit is asked (softly, "
         "limit_weight) to move away at limit_gain_per_s times how far it is inside the margin, "
-        "in both solves: the tasks' free directions (the cutter's turn about the vertical, the "
-        "arms' redundancy) keep an elbow off its stop before the goal needs it there. 0: off "
-        "(no rows at all).",
+        "in a third solve that holds both tasks' rows: only the tasks' free directions (the "
+        "cutter's turn about the vertical, the arms' redundancy) are used, to keep an elbow "
+        "off its stop before the goal needs it there. 0: off (no third solve).",
     )
     limit_gain_per_s: float = Field(
         default=1.0, gt=0, description="Speed away from a limit per rad inside the margin, 1/s."
     )
     limit_weight: float = Field(
-        default=1e-2,
+        default=100.0,
         gt=0,
-        description="Weight of the limit rows' slack (rad⁻²): above the regularisations, far "
-        "below the tasks (per-step errors of mm at weight 1), so it only uses what they leave.",
+        description="Weight of the limit rows' slack in solve 3 against 1 for each joint's "
+        "distance from solve 2's step (rad⁻²).",
     )
     # --- collision avoidance (paper eq. (7)–(8)) -------------------------------------------
     trunk: DamperGroup = Field(

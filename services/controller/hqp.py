@@ -63,8 +63,10 @@ class LexicographicHQP:
     ) -> None:
         """``bound_steps``: give each solve the soft step bound ``bound_steps()`` sets; off,
         the solves have no such rows at all (inactive soft rows would still add slack
-        variables and change the steps by round-off). ``limit_weight``: give solves 1 and 2
-        the soft rows ``avoid_limits()`` sets, with this slack weight; None: no such rows."""
+        variables and change the steps by round-off). ``limit_weight``: a third solve, under
+        every inequality and both tasks' rows held, moves joints away from their position
+        limits through the soft rows ``avoid_limits()`` sets (this slack weight against 1 for
+        staying at Δq₂); None: no third solve."""
         import placo
 
         self.robot = robot
@@ -91,9 +93,19 @@ class LexicographicHQP:
         self.acc2 = self._step_bound(self.s2, "acceleration2")
         self.hold = self.s2.add_joint_space_half_spaces_constraint(np.zeros((1, nq)), np.ones(1))
         self.hold.configure("hold_absolute", "hard", 1.0)
-        self.limit_weight = limit_weight
-        self.lim1 = self._arm_rows(self.s1, "limits1", limit_weight)
-        self.lim2 = self._arm_rows(self.s2, "limits2", limit_weight)
+        # Solve 3 (limit_weight): only what both tasks leave free, towards the joints' room.
+        self.s3 = self._solver(placo, dt_s) if limit_weight is not None else None
+        if self.s3 is not None:
+            self.stay = self.s3.add_joints_task()  # as close to Δq₂ as the limit rows allow
+            self.stay.configure("stay", "soft", 1.0)
+            self.damp3 = self.s3.add_joint_space_half_spaces_constraint(
+                np.zeros((1, nq)), np.ones(1)
+            )
+            self.hold3 = self.s3.add_joint_space_half_spaces_constraint(
+                np.zeros((1, nq)), np.ones(1)
+            )
+            self.hold3.configure("hold_tasks", "hard", 1.0)
+        self.lim3 = self._arm_rows(self.s3, "limits3", limit_weight)
 
         # A joint goal (retracing a path): one solve, the joints task under the same limits
         # and dampers.
@@ -135,13 +147,13 @@ class LexicographicHQP:
     def avoid_limits(self, q_rad: np.ndarray, margin_rad: float, gain_step: float) -> None:
         """Ask each arm joint within ``margin_rad`` of a position limit (``q_rad``, arm order)
         to step away by at least ``gain_step`` times its depth into the margin (rad), as a
-        soft row in solves 1 and 2; the other joints' rows stay inactive. Only for a solver
-        built with ``limit_weight``."""
-        if self.lim1 is None or self.lim2 is None:
+        soft row of solve 3; the other joints' rows stay inactive. Only for a solver built
+        with ``limit_weight``."""
+        if self.lim3 is None:
             raise ValueError("avoid_limits() on an HQP built without limit_weight")
-        b = limit_rows_b(q_rad, self.robot.lower_rad, self.robot.upper_rad, margin_rad, gain_step)
-        for c in (self.lim1, self.lim2):
-            c.b = b
+        self.lim3.b = limit_rows_b(
+            q_rad, self.robot.lower_rad, self.robot.upper_rad, margin_rad, gain_step
+        )
 
     def bound_steps(self, q_rad: np.ndarray, low_rad: np.ndarray, high_rad: np.ndarray) -> None:
         """Keep each arm joint's step from ``q_rad`` (arm order, rad) within [low, high] as a
@@ -187,7 +199,29 @@ class LexicographicHQP:
             dq2 = np.array(self.s2.solve(False))
         except RuntimeError as exc:
             return HqpResult(dq1, "absolute_only", f"relative QP failed ({_short(exc)})")
+        if self.s3 is not None:
+            dq2 = self._off_the_limits(dq2, rows, dt_s, soft=fallback == "softened")
         return HqpResult(dq2, fallback, reason)
+
+    def _off_the_limits(
+        self, dq2: np.ndarray, rows: DamperRows, dt_s: float, soft: bool
+    ) -> np.ndarray:
+        """Solve 3: Δq with both tasks' rows held at what Δq₂ gives them (± HOLD_EPS), the
+        dampers as in solves 1–2, the limit rows soft; Δq₂ itself when it fails (Δq₂ is
+        feasible, so only round-off can make it)."""
+        assert self.s3 is not None
+        self.s3.dt = dt_s
+        self.damp3.A, self.damp3.b = rows.A, rows.b
+        self.damp3.configure("dampers3", "soft" if soft else "hard", self.w.soft_damper)
+        A = np.vstack([self.abs_pos.A, self.abs_ori.A, self.rel_pos.A, self.rel_ori.A])
+        self.hold3.A, self.hold3.b = self._held_rows(A[:, N_FBASE_V:], dq2)
+        q = self.robot.q_full[self.robot.q_idx]
+        goal = q + self.robot.arm_order(dq2)
+        self.stay.set_joints(dict(zip(self.robot.names, goal.tolist(), strict=True)))
+        try:
+            return np.array(self.s3.solve(False))
+        except RuntimeError:
+            return dq2
 
     def solve_joints(self, q_step: dict[str, float], rows: DamperRows, dt_s: float) -> HqpResult:
         """Δq towards the per-step joint targets ``q_step`` (name → rad) under every
@@ -213,14 +247,18 @@ class LexicographicHQP:
     def _hold_absolute(self, dq1: np.ndarray) -> None:
         """Solve 2 keeps A₁ Δq = A₁ Δq₁ (± HOLD_EPS) through 2 half-spaces per absolute row."""
         A1 = np.vstack([self.abs_pos.A, self.abs_ori.A])[:, N_FBASE_V:]
-        y = A1 @ dq1[N_FBASE_V:]
-        m = len(A1)
+        self.hold.A, self.hold.b = self._held_rows(A1, dq1)
+
+    def _held_rows(self, A: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Half-spaces keeping ``A Δq = A dq`` (± HOLD_EPS) in placo's configuration space:
+        ``A`` (rows × the arm joints' v columns) acts on q + Δq."""
+        y = A @ dq[N_FBASE_V:]
+        m = len(A)
         H = np.zeros((2 * m, self.robot.model.nq))
-        H[:m, N_FBASE_Q:] = A1
-        H[m:, N_FBASE_Q:] = -A1
+        H[:m, N_FBASE_Q:] = A
+        H[m:, N_FBASE_Q:] = -A
         qa = self.robot.q_full[N_FBASE_Q:]
-        self.hold.A = H
-        self.hold.b = np.concatenate([A1 @ qa + y + HOLD_EPS, -(A1 @ qa) - y + HOLD_EPS])
+        return H, np.concatenate([A @ qa + y + HOLD_EPS, -(A @ qa) - y + HOLD_EPS])
 
 
 def _short(exc: Exception) -> str:
