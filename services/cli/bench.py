@@ -62,6 +62,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--ticks", type=int, default=2000, help="control ticks per obstacle count")
     c.add_argument("--targets", type=int, default=100, help="reach targets (0: skip reach)")
     c.add_argument("--seed", type=int, default=6, help="seed of the scenes and the targets")
+    c.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="controller setting for the bench, e.g. limit_margin_rad=0.3; repeatable",
+    )
     c.add_argument("--json", action="store_true", help="print one JSON object")
     c.set_defaults(func=cmd_bench_controller)
     f = bsub.add_parser(
@@ -179,8 +186,11 @@ def cmd_bench_sim(args: argparse.Namespace) -> int:
 
 def cmd_bench_controller(args: argparse.Namespace) -> int:
     from services.controller.bench import run_controller_bench, table
+    from services.runtime.settings import parse_overrides
 
-    result = run_controller_bench(args.ticks, args.targets, args.seed, progress=not args.json)
+    result = run_controller_bench(
+        args.ticks, args.targets, args.seed, progress=not args.json, sets=parse_overrides(args.set)
+    )
     print(json.dumps(result, indent=2) if args.json else table(result))
     return 0
 

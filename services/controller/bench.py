@@ -196,16 +196,22 @@ def reach_run(
 
 
 def run_controller_bench(
-    ticks: int = 2000, targets: int = 100, seed: int = 6, progress: bool = True
+    ticks: int = 2000,
+    targets: int = 100,
+    seed: int = 6,
+    progress: bool = True,
+    sets: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """Every figure of BENCHMARKS.md's controller section, as one flat dict."""
+    """Every figure of BENCHMARKS.md's controller section, as one flat dict; ``sets``:
+    controller settings other than the defaults (a bad one raises SettingsError naming it)."""
     from services.controller import SERVICE
     from services.runtime.settings import load_settings
 
-    settings = load_settings(SERVICE.settings, {})
+    settings = load_settings(SERVICE.settings, {}, sets or {}, service="controller")
     out: dict[str, Any] = {
         "ticks_per_case": ticks,
         "seed": seed,
+        "settings": sets or {},
         "cpu_count": os.cpu_count(),
         "load_avg_1min_before": os.getloadavg()[0],
     }

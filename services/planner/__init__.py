@@ -277,6 +277,14 @@ class Settings(ServiceSettings):
         "branches, a link at the dampers' d_s) plans from where the attempt began instead, and "
         "the arms first go back along the joints they came in by (free: they came that way).",
     )
+    harvest_joints_after_stall: bool = Field(
+        default=False,
+        description="A harvest that makes no progress with the cutter held farther than "
+        "stalled_cut_tolerance_m from its pose (a joint at its stop: orchard seed 19, 16 mm) "
+        "gets, once per attempt, a joint goal: the "
+        "harvest pose's IK solution nearest the arms, under the controller's limits and "
+        "dampers; then the pose goals again.",
+    )
     plan_self_margin_m: float = Field(
         default=0.005, ge=0, le=0.1, description="… and its bodies this far apart, m."
     )

@@ -164,6 +164,7 @@ class Machine:
     following: bool = False  # ``retrace`` is the planned approach path, not a way back
     replans_left: int = 0  # planned paths still allowed this attempt after one was left
     planned_after_stall: bool = False  # this attempt's stalled approach got its planned path
+    harvest_jointed: bool = False  # this attempt's stalled harvest got its joint goal
 
     def __post_init__(self) -> None:
         self.path = JointPath(self.s.retrace_step_rad)
@@ -373,6 +374,9 @@ class Machine:
     def _harvest(self, now: int, st: ControlStatus, basket: int | None) -> None:
         rec = self.target
         assert rec is not None
+        if self.following:
+            self._follow_harvest(now)
+            return
         exact = self._reached(st, self.s.harvest_tolerance_m)
         held = self._reached(st, self.s.harvest_tolerance_m, self.s.catch_tolerance_m)
         if exact or (held and self.progress.stuck(now, self.s.settle_s)):
@@ -386,7 +390,68 @@ class Machine:
             err_mm = st.abs_position_error_m * 1e3
             self._send_cut(rec, now, basket, f" (held {err_mm:.0f} mm short of the pose)")
             return
+        if self._harvest_by_joints(rec, now, st):
+            return
         self._check_stuck(now, self.s.harvest_timeout_s, leave=True, st=st)
+
+    def _harvest_by_joints(self, rec: FruitRecord, now: int, st: ControlStatus) -> bool:
+        """harvest_joints_after_stall: a stalled harvest gets one joint goal per attempt, the
+        harvest pose's IK solution nearest the arms. The controller is local: a joint at its
+        stop holds the cutter short of a pose the IK reaches with that joint inside (orchard
+        seed 19: 16 mm short, cutter j4 at +2.094 rad). True: the goal is being followed."""
+        if not self.s.harvest_joints_after_stall or self.harvest_jointed or self.q_rad is None:
+            return False
+        if not self.progress.stuck(now, self.s.no_progress_s):
+            return False
+        if (
+            not self.progress.counts(st)
+            or st.abs_position_error_m <= self.s.stalled_cut_tolerance_m
+        ):
+            return False  # the cutter is not the tool held (a neighbour holds the dish)
+        self.harvest_jointed = True
+        q = self.q_rad
+        sols = self.kin.solutions(
+            harvest_pose(self._aimed(rec), self._settings_for(rec), rec.dish_back_m)
+        )
+        if not sols:
+            return False
+        best = min(sols, key=lambda sol: float(np.max(np.abs(sol.q_rad - q))))
+        gap = float(np.max(np.abs(best.q_rad - q)))
+        if gap <= self.s.retrace_tolerance_rad:
+            return False  # the arms are at the nearest solution already
+        s = self.s
+        follow = Retrace(
+            [q.copy(), best.q_rad.copy()],
+            s.plan_lookahead_rad,
+            s.retrace_tolerance_rad,
+            s.retrace_tolerance_rad / 2,
+            now,
+            best_ns=now,
+        )
+        follow.update(q, now)
+        why = (
+            f"harvest no progress (best task error {self.progress.best_m * 1e3:.0f} mm"
+            f"{self._now_off(st)}): a joint goal to the harvest pose's IK solution nearest the "
+            f"arms (yaw {best.yaw_deg:.0f}°, {gap:.2f} rad away)"
+        )
+        self.events.append(Event("replanned", rec.fruit_id, reason=why))
+        self.retrace, self.retrace_touching, self.following = follow, True, True
+        self.progress = Progress(now, self.next_seq)
+        return True
+
+    def _follow_harvest(self, now: int) -> None:
+        """Towards the harvest pose's IK solution; at its end (or stuck, or timed out) the pose
+        goals take over with the harvest's whole time again."""
+        end = self._path_end(now, self.s.harvest_timeout_s)
+        if end is None:
+            return
+        how, short = end
+        self.retrace, self.following = None, False
+        self.progress = Progress(now, self.next_seq)
+        rec = self.target
+        if how != "ended" and rec is not None:
+            why = f"harvest joint goal {how} {short:.2f} rad short of its end: pose goals"
+            self.events.append(Event("replanned", rec.fruit_id, reason=why))
 
     def _send_cut(self, rec: FruitRecord, now: int, basket: int | None, note: str = "") -> None:
         """Close the shears on ``rec`` (``note``: what the cut_sent reason adds)."""
@@ -644,6 +709,7 @@ class Machine:
         self.progress = Progress(now, self.next_seq)
         self.replans_left = self.s.plan_retries
         self.planned_after_stall = False
+        self.harvest_jointed = False
         follow = self._planned_approach(rec) if self.s.plan_approach == "always" else None
         self._enter("approach", now)
         if follow is not None:

@@ -46,3 +46,17 @@ def test_the_table_shows_every_obstacle_count() -> None:
         r |= {f"{k}_ms_{n}": 0.5 for k in keys} | {f"obstacles_near_mean_{n}": 1.0}
     text = table(r)
     assert all(f"{n:9d}" in text for n in OBSTACLE_COUNTS)
+
+
+def test_a_setting_given_to_the_bench_reaches_the_core_and_a_bad_one_is_named() -> None:
+    import pytest
+
+    from services.controller.bench import run_controller_bench
+    from services.runtime.settings import SettingsError
+
+    with pytest.raises(SettingsError, match="limit_margin_rad"):
+        run_controller_bench(ticks=5, targets=0, progress=False, sets={"limit_margin_rad": -1})
+    margin = load_settings(SERVICE.settings, {}, {"limit_margin_rad": 0.3})
+    pts = reachable_targets(1, seed=3)
+    r = reach_run(pts, margin, max_s=6.0)  # the third solve still reaches, within the limits
+    assert r["reach_success"] == 1.0 and r["violations"] == 0

@@ -15,7 +15,7 @@ from services.planner.core import PlannerCore
 from services.planner.kinematics import IkSolution
 from services.planner.machine import Goal
 from services.planner.motion import ApproachPlanner, trunk_for
-from services.planner.poses import FruitShape, pre_pose
+from services.planner.poses import FruitShape, harvest_pose, pre_pose
 from services.robot.model import HOME_RAD, TOOL_FRAME
 from tests.unit.test_planner_bench_fates import NS, TICK_NS, status
 from tests.unit.test_planner_select import A, core_with, fruit
@@ -316,3 +316,52 @@ def test_no_path_from_a_stall_is_planned_from_where_the_attempt_began() -> None:
     back = len(m.path.points)
     assert all(np.allclose(a, b) for a, b in zip(way[:back], reversed(m.path.points), strict=True))
     assert all(m.motion.space.clearance(q).obstacles_m >= 0.045 for q in way[back:])
+
+
+def stalled_harvest(on: bool) -> tuple[PlannerCore, list[Goal], np.ndarray]:
+    """The approach reaches its pre-pose; the harvest then holds 16 mm short of its pose (a
+    joint at its stop) until the arms have followed a joint goal, after which the pose is
+    reached. The core, its goals and the harvest pose's IK solution nearest HOME."""
+    core = core_with("nearest", fruit(1, A, 0.5), harvest_joints_after_stall=on)
+    rec = core.book.records[1]
+    m = core.machine
+    sols = core.kin.solutions(harvest_pose(rec.planned, m.pose_settings))
+    assert sols
+    nearest = min(sols, key=lambda s: float(np.abs(s.q_rad - HOME).max())).q_rad
+    t, q = 0, HOME.copy()
+    m.note_joints(q)
+    goals: list[Goal] = []
+    while t < 20 * NS and not (rec.finished or rec.cuts):
+        t += TICK_NS
+        followed = any(g.joints_rad is not None for g in goals)
+        err = 0.016 if m.phase == "harvest" and not followed else 0.0
+        g = m.step(t, status(m.next_seq, err, t), m.next_seq + 1, 0)
+        goals.append(g)
+        if g.joints_rad is not None:
+            q = q + np.clip(g.joints_rad - q, -0.02, 0.02)
+            m.note_joints(q)
+    return core, goals, nearest
+
+
+def test_a_stalled_harvest_gets_a_joint_goal_to_the_nearest_ik_solution_then_cuts() -> None:
+    core, goals, nearest = stalled_harvest(True)
+    m, rec = core.machine, core.book.records[1]
+    harvest = [g for g in goals if g.phase == "harvest"]
+    first = next(k for k, g in enumerate(harvest) if g.joints_rad is not None)
+    assert first > 0 and all(g.poses is not None for g in harvest[:first])  # pose goals first
+    joint = harvest[first].joints_rad
+    assert joint is not None and np.abs(joint - nearest).max() < 1e-9
+    why = [e.reason for e in m.events if e.event == "replanned"]
+    assert len(why) == 1 and why[0].startswith("harvest no progress (best task error 16 mm")
+    assert "IK solution nearest the arms" in why[0]
+    assert rec.cuts == 1 and not rec.finished  # the pose goals again, reached: the cut
+    assert harvest[-1].poses is not None
+
+
+def test_without_the_setting_a_stalled_harvest_is_given_up_for_now() -> None:
+    core, goals, _ = stalled_harvest(False)
+    rec = core.book.records[1]
+    assert all(g.joints_rad is None for g in goals if g.phase == "harvest")
+    assert rec.cuts == 0
+    skipped = [e.reason for e in core.machine.events if e.event == "fruit_skipped"]
+    assert skipped and skipped[0].startswith("blocked: harvest no progress")
