@@ -288,12 +288,10 @@ class Machine:
         """Along the planned path; at its end the pose goals take over with the approach's
         whole time again. Stuck or timed out: planned again from where the arms are
         (``plan_retries`` times per attempt), then the pose goals."""
-        end = self._path_end(now, self.s.approach_timeout_s)
+        end = self._followed(now, self.s.approach_timeout_s)
         if end is None:
             return
         how, short = end
-        self.retrace, self.following = None, False
-        self.progress = Progress(now, self.next_seq)
         rec = self.target
         if how != "ended" and rec is not None and self.replans_left > 0:
             self.replans_left -= 1
@@ -442,16 +440,23 @@ class Machine:
     def _follow_harvest(self, now: int) -> None:
         """Towards the harvest pose's IK solution; at its end (or stuck, or timed out) the pose
         goals take over with the harvest's whole time again."""
-        end = self._path_end(now, self.s.harvest_timeout_s)
+        end = self._followed(now, self.s.harvest_timeout_s)
         if end is None:
             return
         how, short = end
-        self.retrace, self.following = None, False
-        self.progress = Progress(now, self.next_seq)
         rec = self.target
         if how != "ended" and rec is not None:
             why = f"harvest joint goal {how} {short:.2f} rad short of its end: pose goals"
             self.events.append(Event("replanned", rec.fruit_id, reason=why))
+
+    def _followed(self, now: int, timeout_s: float) -> tuple[str, float] | None:
+        """``_path_end`` of a followed path; at its end the pose goals take over: the path is
+        dropped and the phase's progress counts afresh."""
+        end = self._path_end(now, timeout_s)
+        if end is not None:
+            self.retrace, self.following = None, False
+            self.progress = Progress(now, self.next_seq)
+        return end
 
     def _send_cut(self, rec: FruitRecord, now: int, basket: int | None, note: str = "") -> None:
         """Close the shears on ``rec`` (``note``: what the cut_sent reason adds)."""
