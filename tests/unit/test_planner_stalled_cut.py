@@ -34,6 +34,16 @@ def test_a_harvest_held_within_the_shears_reach_is_cut_when_it_stalls() -> None:
     assert s.no_progress_s * NS <= harvest_ns <= (s.no_progress_s + 0.1) * NS
 
 
+def test_a_harvest_held_16_mm_short_is_cut_too() -> None:
+    """Orchard seed 19: held 16 mm short of an estimated pose, the shears closed 7.7 mm from
+    the peduncle; at 12 mm (the old tolerance) the fruit and three behind it were given up."""
+    core, _ = drive(0.016)
+    sent = [e for e in core.machine.events if e.event == "cut_sent"]
+    assert sent and sent[-1].reason == "cut 1/2 (held 16 mm short of the pose)"
+    core, _ = drive(0.016, stalled_cut_tolerance_m=0.012)
+    assert core.book.records[1].cuts == 0
+
+
 def test_a_harvest_held_further_off_is_given_up_as_before() -> None:
     core, _ = drive(0.03)
     rec = core.book.records[1]
