@@ -296,7 +296,7 @@ class ControllerCore:
         t = time.perf_counter()
         assert self.goals is not None
         self._bound_acceleration(q, dt_s)
-        if self.s.limit_margin_rad > 0:
+        if self.hqp.s3 is not None:  # limit_margin_rad > 0
             self.hqp.avoid_limits(q, self.s.limit_margin_rad, self.s.limit_gain_per_s * dt_s)
         if self.goals.joints_rad is None:
             res = self.hqp.solve(tick.abs_step, tick.rel_step, rows, dt_s)

@@ -342,17 +342,21 @@ class Machine:
         self.left_because = plan.why
         if plan.path is None:
             return None
+        return self._to_follow(plan.path, self.q_rad, self.progress.since_ns)
+
+    def _to_follow(self, path: list[np.ndarray], q: np.ndarray, now: int) -> Retrace:
+        """``path`` (joints, arm order) as a path to follow from ``q``, its first goal ahead of
+        the arms, not where they are."""
         s = self.s
-        now = self.progress.since_ns
         follow = Retrace(
-            plan.path,
+            path,
             s.plan_lookahead_rad,
             s.retrace_tolerance_rad,
             s.retrace_tolerance_rad / 2,
             now,
             best_ns=now,
         )
-        follow.update(self.q_rad, now)  # the first goal ahead of the arms, not where they are
+        follow.update(q, now)
         return follow
 
     def _plan_from_attempt_start(
@@ -413,20 +417,12 @@ class Machine:
         )
         if not sols:
             return False
-        best = min(sols, key=lambda sol: float(np.max(np.abs(sol.q_rad - q))))
-        gap = float(np.max(np.abs(best.q_rad - q)))
+        gaps = [float(np.max(np.abs(sol.q_rad - q))) for sol in sols]
+        i = int(np.argmin(gaps))
+        best, gap = sols[i], gaps[i]
         if gap <= self.s.retrace_tolerance_rad:
             return False  # the arms are at the nearest solution already
-        s = self.s
-        follow = Retrace(
-            [q.copy(), best.q_rad.copy()],
-            s.plan_lookahead_rad,
-            s.retrace_tolerance_rad,
-            s.retrace_tolerance_rad / 2,
-            now,
-            best_ns=now,
-        )
-        follow.update(q, now)
+        follow = self._to_follow([q.copy(), best.q_rad.copy()], q, now)
         why = (
             f"harvest no progress (best task error {self.progress.best_m * 1e3:.0f} mm"
             f"{self._now_off(st)}): a joint goal to the harvest pose's IK solution nearest the "
