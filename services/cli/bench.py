@@ -185,12 +185,22 @@ def cmd_bench_sim(args: argparse.Namespace) -> int:
 
 
 def cmd_bench_controller(args: argparse.Namespace) -> int:
-    from services.controller.bench import run_controller_bench, table
-    from services.runtime.settings import parse_overrides
+    import sys
 
-    result = run_controller_bench(
-        args.ticks, args.targets, args.seed, progress=not args.json, sets=parse_overrides(args.set)
-    )
+    from services.controller.bench import run_controller_bench, table
+    from services.runtime.settings import SettingsError, parse_overrides
+
+    try:
+        result = run_controller_bench(
+            args.ticks,
+            args.targets,
+            args.seed,
+            progress=not args.json,
+            sets=parse_overrides(args.set),
+        )
+    except SettingsError as exc:
+        print(f"harvest bench controller: {exc}", file=sys.stderr)
+        return 2
     print(json.dumps(result, indent=2) if args.json else table(result))
     return 0
 

@@ -83,6 +83,12 @@ def test_live_tools_without_a_run_say_so(tmp_path: Path) -> None:
     assert r.returncode == 1 and "is the router running" in r.stderr
 
 
+def test_a_bad_controller_bench_setting_is_named_without_a_traceback() -> None:
+    r = harvest("bench", "controller", "--targets", "0", "--set", "limit_margin_rad=-1")
+    assert r.returncode == 2 and "limit_margin_rad" in r.stderr
+    assert "Traceback" not in r.stderr
+
+
 def test_info_on_bad_files(tmp_path: Path) -> None:
     (tmp_path / "empty.mcap").write_bytes(b"")
     (tmp_path / "text.mcap").write_text("not an mcap at all")
